@@ -1,0 +1,403 @@
+//! [`Globe`]: one frame of Globus, wiring the three subsystems.
+//!
+//! ```text
+//!  view ──> select (tiling) ──> draw list ──────────────> GlobeRenderer::prepare
+//!              ▲      │ wanted tiles                          ▲
+//!              │      ├─ loaded on the CPU, not on the GPU ──> TilePool::upload (budgeted)
+//!   Resident-  │      └─ not loaded ─────────────────────────> TerrainLayer (scheduler, cache)
+//!   Oracle ────┘
+//! ```
+//!
+//! Selection sees a tile as loaded only when it is both in the CPU cache and resident in the
+//! GPU pool ([`ResidentOracle`]), so everything it draws can be drawn this very frame: no
+//! holes while data streams in, only coarser ancestors.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use globus_geo::{Cartographic, Ellipsoid, View};
+use globus_render::{
+    DrawStats, FrameInputs, GlobeRenderer, Lighting, PoolStats, TilePool, TilePoolOptions,
+    near_plane_m,
+};
+use globus_stream::{
+    LayerStats, ProceduralSource, TerrainLayer, TerrainLayerOptions, TerrainSource,
+};
+use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
+use globus_tiling::{
+    Selection, SelectionOptions, SelectionStats, TileInfo, TileKey, TileOracle, TileRequest,
+    TileState, TilingScheme, select_into,
+};
+
+/// The default planet: seed 24 has about a third land and a mountain range at 46 N 7.6 E,
+/// where the benchmark path dives.
+pub const DEFAULT_SEED: u64 = 24;
+
+/// Everything that configures a globe.
+#[derive(Clone, Copy, Debug)]
+pub struct GlobeOptions {
+    /// Seed of the procedural planet.
+    pub seed: u64,
+    /// Screen-space error bound, pixels.
+    pub max_sse_px: f64,
+    /// Deepest level of the procedural planet.
+    pub max_level: u8,
+    /// GPU tile slots.
+    pub gpu_slots: u32,
+    /// Tiles uploaded per frame.
+    pub uploads_per_frame: u32,
+    /// CPU cache budget, bytes.
+    pub cache_bytes: usize,
+    /// Tile worker threads.
+    pub workers: usize,
+}
+
+impl Default for GlobeOptions {
+    fn default() -> Self {
+        Self {
+            seed: DEFAULT_SEED,
+            max_sse_px: 2.0,
+            max_level: 26,
+            gpu_slots: 1024,
+            uploads_per_frame: 24,
+            cache_bytes: TerrainLayerOptions::default().cache_bytes,
+            workers: TerrainLayerOptions::default().workers,
+        }
+    }
+}
+
+/// What one frame did.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameReport {
+    /// Selection counters.
+    pub selection: SelectionStats,
+    /// Microseconds spent in selection.
+    pub select_us: f64,
+    /// Tiles wanted but not drawable yet (loading or uploading).
+    pub wanted: u32,
+    /// Data-side counters.
+    pub layer: LayerStats,
+    /// GPU pool counters.
+    pub pool: PoolStats,
+    /// What will be drawn.
+    pub draw: DrawStats,
+    /// The screen-space error bound used this frame (raised when budgets bind).
+    pub sse_bound_px: f64,
+}
+
+/// The procedural planet, its data layer and its renderer.
+pub struct Globe {
+    layer: TerrainLayer,
+    /// The renderer and its pools.
+    pub renderer: GlobeRenderer,
+    options: SelectionOptions,
+    configured_sse_px: f64,
+    selection: Selection,
+    /// Sun and air.
+    pub lighting: Option<Lighting>,
+}
+
+/// Selection's view of the world: a tile is loaded when the CPU cache has it *and* it is
+/// resident in the GPU pool.
+pub struct ResidentOracle<'a> {
+    layer: &'a TerrainLayer,
+    pool: &'a TilePool,
+}
+
+impl TileOracle for ResidentOracle<'_> {
+    fn scheme(&self) -> TilingScheme {
+        self.layer.scheme()
+    }
+
+    fn tile(&self, key: TileKey) -> TileInfo {
+        let mut info = self.layer.tile(key);
+        if info.state == TileState::Loaded && !self.pool.is_resident(key) {
+            info.state = TileState::Unloaded;
+        }
+        info
+    }
+}
+
+impl Globe {
+    /// A globe rendering into `colour_format` on `device`.
+    pub fn new(
+        device: &wgpu::Device,
+        colour_format: wgpu::TextureFormat,
+        options: &GlobeOptions,
+    ) -> Self {
+        let source: Arc<dyn TerrainSource> =
+            Arc::new(ProceduralSource::new(options.seed, options.max_level));
+        let layer = TerrainLayer::new(
+            source,
+            TerrainLayerOptions {
+                cache_bytes: options.cache_bytes,
+                workers: options.workers,
+            },
+        );
+        let pool = TilePool::new(
+            device,
+            TilePoolOptions {
+                slots: options.gpu_slots,
+                uploads_per_frame: options.uploads_per_frame,
+            },
+        );
+        let selection_options = SelectionOptions {
+            max_sse_px: options.max_sse_px,
+            occluder: *layer.occluder(),
+            near_m: 0.01,
+            max_level: layer.max_level(),
+        };
+        Self {
+            layer,
+            renderer: GlobeRenderer::new(device, colour_format, pool),
+            options: selection_options,
+            configured_sse_px: options.max_sse_px,
+            selection: Selection::default(),
+            lighting: None,
+        }
+    }
+
+    /// The planet's ellipsoid.
+    pub fn ellipsoid(&self) -> Ellipsoid {
+        *self.layer.ellipsoid()
+    }
+
+    /// The data layer.
+    pub fn layer(&self) -> &TerrainLayer {
+        &self.layer
+    }
+
+    /// The last selection.
+    pub fn selection(&self) -> &Selection {
+        &self.selection
+    }
+
+    /// Height of the surface at a longitude and latitude (radians), metres: from the source
+    /// if it can say, else from the deepest loaded tile, else 0.
+    pub fn ground_height_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
+        if let Some(h) = self.layer.source().height_at(lon_rad, lat_rad) {
+            return h;
+        }
+        let scheme = TilingScheme::Geographic;
+        let mut best = None;
+        for level in 0..=self.layer.max_level() {
+            let Some(key) = scheme.tile_at(lon_rad, lat_rad, level) else {
+                break;
+            };
+            match self.layer.get(key) {
+                Some(data) => best = Some(data.clone()),
+                None => break,
+            }
+        }
+        best.map_or(0.0, |d| sample_heights(&d.tile, lon_rad, lat_rad))
+    }
+
+    /// The default sun for a camera: over a point 35 degrees west of it and at half its
+    /// latitude less 10 degrees, so that anywhere on Earth the view is lit from the
+    /// south-west (north-west in the south) about 40 degrees above the horizon, and relief
+    /// casts visible shading.
+    pub fn default_lighting(view: &View, ellipsoid: &Ellipsoid) -> Lighting {
+        let c = ellipsoid
+            .ecef_to_cartographic(view.position)
+            .unwrap_or_default();
+        let lat = c.lat_rad * 0.5 - 10f64.to_radians() * c.lat_rad.signum();
+        Lighting::sun_over(c.lon_rad - 35f64.to_radians(), lat)
+    }
+
+    /// Runs one frame's CPU work: selection, data requests, uploads, and the draw list.
+    pub fn frame(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        view: &View,
+    ) -> FrameReport {
+        let ellipsoid = self.ellipsoid();
+        let eye = ellipsoid
+            .ecef_to_cartographic(view.position)
+            .unwrap_or_default();
+        let ground = self.ground_height_m(eye.lon_rad, eye.lat_rad);
+        let height_above_ground = (eye.height_m - ground).max(0.0);
+        self.options.near_m = near_plane_m(height_above_ground);
+        let pool = &mut self.renderer.pool;
+        pool.begin_frame();
+
+        let started = Instant::now();
+        select_into(
+            view,
+            &ResidentOracle {
+                layer: &self.layer,
+                pool,
+            },
+            &self.options,
+            &mut self.selection,
+        );
+        let select_us = started.elapsed().as_secs_f64() * 1e6;
+
+        // Wanted tiles already on the CPU go to the GPU; the rest to the loaders.
+        let (to_upload, to_load): (Vec<TileRequest>, Vec<TileRequest>) = self
+            .selection
+            .requests
+            .iter()
+            .partition(|r| self.layer.get(r.key).is_some());
+        let layer_stats = self.layer.update(&self.selection.draw, &to_load);
+        for d in &self.selection.draw {
+            let mut key = Some(d.key);
+            while let Some(k) = key {
+                pool.touch(k);
+                key = k.parent();
+            }
+        }
+        for r in &to_upload {
+            if !pool.can_upload() {
+                break;
+            }
+            if let Some(data) = self.layer.get(r.key) {
+                pool.upload(queue, r.key, &data.mesh, &data.tile.colour);
+            }
+        }
+        self.adapt_detail(layer_stats.over_budget);
+
+        let lighting = self
+            .lighting
+            .unwrap_or_else(|| Self::default_lighting(view, &ellipsoid));
+        let tiles: Vec<TileKey> = self.selection.draw.iter().map(|d| d.key).collect();
+        let draw = self.renderer.prepare(
+            device,
+            queue,
+            &FrameInputs {
+                view,
+                near_m: self.options.near_m,
+                eye_height_m: eye.height_m,
+                eye_up: ellipsoid.geodetic_normal_from_lon_lat(eye.lon_rad, eye.lat_rad),
+                planet_radius_m: ellipsoid.mean_radius(),
+                lighting,
+                tiles: &tiles,
+            },
+        );
+        FrameReport {
+            selection: self.selection.stats,
+            select_us,
+            wanted: self.selection.requests.len() as u32,
+            layer: layer_stats,
+            pool: self.renderer.pool.stats(),
+            draw,
+            sse_bound_px: self.options.max_sse_px,
+        }
+    }
+
+    /// When the GPU pool or the CPU cache cannot hold what the view needs, raise the error
+    /// bound (less detail) instead of thrashing; relax it again when there is room.
+    fn adapt_detail(&mut self, cache_over_budget: bool) {
+        let capacity = f64::from(self.renderer.pool.capacity());
+        // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
+        let needed = self.selection.draw.len() as f64 * 4.0 / 3.0;
+        let sse = &mut self.options.max_sse_px;
+        if needed > capacity * 0.9 || cache_over_budget {
+            *sse *= 1.25;
+        } else if needed < capacity * 0.6 && *sse > self.configured_sse_px {
+            *sse = (*sse / 1.1).max(self.configured_sse_px);
+        }
+    }
+
+    /// Records the frame prepared by [`Globe::frame`].
+    pub fn render(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        colour: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        self.renderer.render(encoder, colour, depth);
+    }
+
+    /// Frames until everything the selection wants is loaded and resident (or `timeout`).
+    /// Returns the last frame's report and whether it completed.
+    pub fn load_completely(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        view: &View,
+        timeout: Duration,
+    ) -> (FrameReport, bool) {
+        let deadline = Instant::now() + timeout;
+        self.renderer.pool.set_uploads_per_frame(u32::MAX);
+        let mut stalled = 0;
+        loop {
+            let report = self.frame(device, queue, view);
+            if report.wanted == 0 {
+                return (report, true);
+            }
+            if Instant::now() > deadline {
+                return (report, false);
+            }
+            // Wait for tiles only if nothing could be uploaded this frame.
+            if report.pool.uploaded_this_frame == 0 {
+                if self.layer.loading() == 0 && report.layer.arrived == 0 {
+                    stalled += 1;
+                    if stalled > 3 {
+                        return (report, false);
+                    }
+                }
+                self.layer.wait_for_tiles(Duration::from_millis(200));
+            } else {
+                stalled = 0;
+            }
+        }
+    }
+}
+
+/// Bilinear height of a tile's grid at a longitude and latitude inside it.
+fn sample_heights(tile: &globus_terrain::TerrainTile, lon_rad: f64, lat_rad: f64) -> f64 {
+    let (u, v) = tile.rect.uv(lon_rad, lat_rad);
+    let n = f64::from(MESH_SEGMENTS);
+    let (x, y) = ((u * n).clamp(0.0, n), (v * n).clamp(0.0, n));
+    let (i, j) = (
+        (x.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
+        (y.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
+    );
+    let (fx, fy) = (x - f64::from(i), y - f64::from(j));
+    let h = |a: i32, b: i32| f64::from(tile.height_at(a, b));
+    let top = h(i, j) * (1.0 - fx) + h(i + 1, j) * fx;
+    let bottom = h(i, j + 1) * (1.0 - fx) + h(i + 1, j + 1) * fx;
+    debug_assert!(HEIGHT_GRID_SIDE > MESH_SEGMENTS as usize);
+    top * (1.0 - fy) + bottom * fy
+}
+
+/// A camera from the command-line convention: degrees, metres, heading clockwise from north,
+/// pitch 0 at the horizon and -90 straight down.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraSpec {
+    /// Longitude, degrees.
+    pub lon_deg: f64,
+    /// Latitude, degrees.
+    pub lat_deg: f64,
+    /// Altitude, metres (above the ellipsoid, or above the ground if `above_ground`).
+    pub alt_m: f64,
+    /// Heading, degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Pitch, degrees (0 horizon, -90 down).
+    pub pitch_deg: f64,
+    /// Whether `alt_m` is above the ground under the camera.
+    pub above_ground: bool,
+}
+
+impl CameraSpec {
+    /// The view for this camera on `globe`.
+    pub fn view(&self, globe: &Globe, fov_y_deg: f64, width: u32, height: u32) -> View {
+        let e = globe.ellipsoid();
+        let (lon, lat) = (self.lon_deg.to_radians(), self.lat_deg.to_radians());
+        let alt = if self.above_ground {
+            globe.ground_height_m(lon, lat) + self.alt_m
+        } else {
+            self.alt_m
+        };
+        View::from_geodetic(
+            &e,
+            Cartographic::new(lon, lat, alt),
+            self.heading_deg.to_radians(),
+            self.pitch_deg.to_radians(),
+            fov_y_deg.to_radians(),
+            width,
+            height,
+        )
+    }
+}

@@ -1,0 +1,10 @@
+//! The Globus application: the engine that wires data, LOD and rendering, and the
+//! subcommands of the `globus` binary.
+
+pub mod engine;
+pub mod geo_cmd;
+pub mod offscreen;
+pub mod path;
+pub mod viewer;
+
+pub use engine::{CameraSpec, FrameReport, Globe, GlobeOptions};

@@ -1,0 +1,434 @@
+//! The `globus` binary. Every failure ends with one line on stderr and a non-zero exit.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use globus_app::engine::{CameraSpec, GlobeOptions};
+use globus_app::geo_cmd;
+use globus_app::offscreen::{Offscreen, save_png};
+use globus_app::path::CameraPath;
+use globus_app::viewer::{self, ViewerOptions};
+use serde_json::json;
+
+#[derive(Parser)]
+#[command(
+    name = "globus",
+    version,
+    about = "Globus: a planetary terrain and virtual-globe engine"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Open a window on the planet (left drag rotates, wheel zooms, right drag tilts and turns).
+    View(ViewArgs),
+    /// Render one complete frame offscreen to a PNG.
+    Render(RenderArgs),
+    /// Replay a camera path offscreen and print timing statistics as JSON.
+    Bench(BenchArgs),
+    /// Geodesy and tile naming conversions.
+    Geo {
+        #[command(subcommand)]
+        command: GeoCommand,
+    },
+}
+
+#[derive(Args, Clone)]
+struct GlobeArgs {
+    /// Screen-space error bound in pixels.
+    #[arg(long, default_value_t = 2.0)]
+    sse: f64,
+    /// Seed of the procedural planet (the default, 24, raises a mountain range where the
+    /// Alps are on Earth).
+    #[arg(long, default_value_t = globus_app::engine::DEFAULT_SEED)]
+    seed: u64,
+    /// Vertical field of view in degrees.
+    #[arg(long = "fov-deg", default_value_t = 60.0)]
+    fov_deg: f64,
+}
+
+#[derive(Args)]
+struct ViewArgs {
+    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG.
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        default_value = "10,30,15000000,0,-90"
+    )]
+    camera: String,
+    /// ALT_M is above the ground under the camera, not above the ellipsoid.
+    #[arg(long)]
+    above_ground: bool,
+    /// Window size, WxH.
+    #[arg(long, default_value = "1280x720")]
+    size: String,
+    #[command(flatten)]
+    globe: GlobeArgs,
+    /// Close the window after this many seconds (for automated checks).
+    #[arg(long)]
+    exit_after: Option<f64>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// Camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (heading clockwise from north, pitch 0 at
+    /// the horizon and -90 straight down, ALT_M above the ellipsoid).
+    #[arg(long, allow_hyphen_values = true)]
+    camera: String,
+    /// ALT_M is above the ground under the camera.
+    #[arg(long)]
+    above_ground: bool,
+    /// Image size, WxH.
+    #[arg(long)]
+    size: String,
+    /// Output PNG.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write statistics as JSON here.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    #[command(flatten)]
+    globe: GlobeArgs,
+    /// Give up waiting for tiles after this many seconds.
+    #[arg(long, default_value_t = 300.0)]
+    timeout_s: f64,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Camera path JSON (see paths/alps-dive.json).
+    #[arg(long)]
+    path: PathBuf,
+    /// Frame size, WxH.
+    #[arg(long, default_value = "1920x1080")]
+    size: String,
+    /// Frames per second of path time.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f64,
+    #[command(flatten)]
+    globe: GlobeArgs,
+}
+
+#[derive(Subcommand)]
+enum GeoCommand {
+    /// Longitude, latitude (degrees) and height (m) to ECEF metres.
+    #[command(allow_negative_numbers = true)]
+    Ecef { lon: f64, lat: f64, height: f64 },
+    /// ECEF metres to longitude, latitude and height.
+    #[command(allow_negative_numbers = true)]
+    Cartographic { x: f64, y: f64, z: f64 },
+    /// The tile containing a point, with its names and bounds.
+    Tile {
+        /// geographic or webmercator.
+        #[arg(long)]
+        scheme: String,
+        /// Longitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lon: f64,
+        /// Latitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lat: f64,
+        /// Zoom level.
+        #[arg(long)]
+        level: u8,
+    },
+}
+
+fn main() {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(
+                e.kind(),
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            ) {
+                let _ = e.print();
+                std::process::exit(
+                    if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+                        2
+                    } else {
+                        0
+                    },
+                );
+            }
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments");
+            eprintln!(
+                "globus: {} (see globus --help)",
+                first.trim_start_matches("error: ")
+            );
+            std::process::exit(2);
+        }
+    };
+    if let Err(e) = run(cli) {
+        eprintln!("globus: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::View(a) => view(a),
+        Command::Render(a) => render(a),
+        Command::Bench(a) => bench(a),
+        Command::Geo { command } => {
+            let out = match command {
+                GeoCommand::Ecef { lon, lat, height } => geo_cmd::ecef(lon, lat, height)?,
+                GeoCommand::Cartographic { x, y, z } => geo_cmd::cartographic(x, y, z)?,
+                GeoCommand::Tile {
+                    scheme,
+                    lon,
+                    lat,
+                    level,
+                } => geo_cmd::tile(&scheme, lon, lat, level)?,
+            };
+            println!("{out}");
+            Ok(())
+        }
+    }
+}
+
+fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
+    if !(a.sse > 0.0 && a.sse <= 1000.0) {
+        bail!(
+            "--sse {} must be a pixel error above 0 and at most 1000",
+            a.sse
+        );
+    }
+    if !(a.fov_deg > 0.5 && a.fov_deg < 170.0) {
+        bail!(
+            "--fov-deg {} must be between 0.5 and 170 degrees",
+            a.fov_deg
+        );
+    }
+    Ok(GlobeOptions {
+        seed: a.seed,
+        max_sse_px: a.sse,
+        ..GlobeOptions::default()
+    })
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s:?} must look like 1920x1080"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s:?}: width is not a whole number"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s:?}: height is not a whole number"))?;
+    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+        bail!("--size {s:?}: width and height must be 1 to 16384 pixels");
+    }
+    Ok((w, h))
+}
+
+fn parse_camera(s: &str, above_ground: bool) -> anyhow::Result<CameraSpec> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 5 {
+        bail!("--camera {s:?} must be LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (5 numbers)");
+    }
+    let mut v = [0.0; 5];
+    for (i, (p, name)) in parts
+        .iter()
+        .zip(["LON", "LAT", "ALT_M", "HEADING_DEG", "PITCH_DEG"])
+        .enumerate()
+    {
+        v[i] = p
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .with_context(|| format!("--camera {s:?}: {name} {p:?} is not a number"))?;
+    }
+    let [lon, lat, alt, heading, pitch] = v;
+    geo_cmd::check_lon_lat(lon, lat).with_context(|| format!("--camera {s:?}"))?;
+    if !(-90.0..=90.0).contains(&pitch) {
+        bail!("--camera {s:?}: pitch {pitch} is outside -90..90 degrees");
+    }
+    let min_alt = if above_ground { 0.01 } else { -500.0 };
+    if !(min_alt..=1.0e9).contains(&alt) {
+        bail!("--camera {s:?}: altitude {alt} m is outside {min_alt}..1e9 m");
+    }
+    Ok(CameraSpec {
+        lon_deg: lon,
+        lat_deg: lat,
+        alt_m: alt,
+        heading_deg: heading.rem_euclid(360.0),
+        pitch_deg: pitch,
+        above_ground,
+    })
+}
+
+/// Fails early, with the path, if a file cannot be written there.
+fn check_writable(path: &Path) -> anyhow::Result<()> {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map(drop)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn view(a: ViewArgs) -> anyhow::Result<()> {
+    let (width, height) = parse_size(&a.size)?;
+    let camera = parse_camera(&a.camera, a.above_ground)?;
+    let globe = globe_options(&a.globe)?;
+    if let Some(s) = a.exit_after
+        && !(s > 0.0 && s.is_finite())
+    {
+        bail!("--exit-after {s} must be a positive number of seconds");
+    }
+    viewer::run(ViewerOptions {
+        globe,
+        camera,
+        fov_deg: a.globe.fov_deg,
+        width,
+        height,
+        exit_after: a.exit_after.map(Duration::from_secs_f64),
+    })
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<()> {
+    let (width, height) = parse_size(&a.size)?;
+    let camera = parse_camera(&a.camera, a.above_ground)?;
+    let options = globe_options(&a.globe)?;
+    check_writable(&a.out)?;
+    if let Some(s) = &a.stats {
+        check_writable(s)?;
+    }
+    let mut off = Offscreen::new(&options, width, height)?;
+    let view = camera.view(&off.globe, a.globe.fov_deg, width, height);
+    let frame = off.render_complete(&view, Duration::from_secs_f64(a.timeout_s.max(0.0)))?;
+    if !frame.complete {
+        eprintln!(
+            "globus: warning: gave up waiting for tiles after {:.1} s; the picture is coarser than the SSE bound asks",
+            frame.load_ms / 1e3
+        );
+    }
+    save_png(&frame.image, &a.out)?;
+    if let Some(path) = &a.stats {
+        let r = &frame.report;
+        let s = &r.selection;
+        let per_slot = r.pool.gpu_bytes / u64::from(r.pool.capacity.max(1));
+        let stats = json!({
+            "tiles_rendered": r.draw.tiles,
+            "nodes_visited": s.nodes_visited,
+            "culled_frustum": s.culled_frustum,
+            "culled_horizon": s.culled_horizon,
+            "max_level": s.max_level,
+            "max_sse_px": s.max_sse_px,
+            "sse_bound_px": r.sse_bound_px,
+            "triangles": r.draw.triangles,
+            "draw_calls": r.draw.draw_calls,
+            "select_us": r.select_us,
+            "load_ms": frame.load_ms,
+            "complete": frame.complete,
+            "tiles_loaded": off.globe.layer().scheduler_stats().loaded,
+            "gpu_tile_bytes": per_slot * u64::from(r.pool.resident),
+            "gpu_pool_bytes": r.pool.gpu_bytes,
+            "adapter": off.ctx.adapter_description(),
+            "camera": {"lon": camera.lon_deg, "lat": camera.lat_deg, "alt_m": view_altitude(&off, &view),
+                        "heading": camera.heading_deg, "pitch": camera.pitch_deg},
+            "size": [width, height],
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&stats)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn view_altitude(off: &Offscreen, view: &globus_geo::View) -> f64 {
+    off.globe
+        .ellipsoid()
+        .ecef_to_cartographic(view.position)
+        .map_or(f64::NAN, |c| c.height_m)
+}
+
+fn bench(a: BenchArgs) -> anyhow::Result<()> {
+    let (width, height) = parse_size(&a.size)?;
+    let options = globe_options(&a.globe)?;
+    if !(a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!("--fps {} must be above 0 and at most 1000", a.fps);
+    }
+    let text = std::fs::read_to_string(&a.path)
+        .with_context(|| format!("cannot read {}", a.path.display()))?;
+    let mut off = Offscreen::new(&options, width, height)?;
+    let path = {
+        let globe = &off.globe;
+        CameraPath::parse(&text, &a.path.display().to_string(), |lon, lat| {
+            globe.ground_height_m(lon.to_radians(), lat.to_radians())
+        })?
+    };
+    let frames = (path.duration() * a.fps).floor() as usize + 1;
+    let mut samples: Vec<[f64; 6]> = Vec::with_capacity(frames);
+    for i in 0..frames {
+        let pose = path.pose(i as f64 / a.fps);
+        let camera = CameraSpec {
+            lon_deg: pose.lon,
+            lat_deg: pose.lat,
+            alt_m: pose.alt,
+            heading_deg: pose.heading,
+            pitch_deg: pose.pitch,
+            above_ground: false,
+        };
+        let view = camera.view(&off.globe, a.globe.fov_deg, width, height);
+        let started = Instant::now();
+        let r = off.globe.frame(&off.ctx.device, &off.ctx.queue, &view);
+        off.draw();
+        let frame_ms = started.elapsed().as_secs_f64() * 1e3;
+        samples.push([
+            r.select_us,
+            frame_ms,
+            f64::from(r.draw.tiles),
+            f64::from(r.selection.nodes_visited),
+            f64::from(r.draw.draw_calls),
+            r.draw.triangles as f64,
+        ]);
+    }
+    let names = [
+        "select_us",
+        "frame_ms",
+        "tiles_rendered",
+        "nodes_visited",
+        "draw_calls",
+        "triangles",
+    ];
+    let mut summary = serde_json::Map::new();
+    summary.insert("frames".into(), json!(frames));
+    summary.insert("size".into(), json!([width, height]));
+    summary.insert("sse_px".into(), json!(a.globe.sse));
+    for (k, name) in names.iter().enumerate() {
+        let mut v: Vec<f64> = samples.iter().map(|s| s[k]).collect();
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+        summary.insert(
+            (*name).into(),
+            json!({"median": q(0.5), "p95": q(0.95), "max": q(1.0)}),
+        );
+    }
+    let nodes_per_tile: Vec<f64> = samples
+        .iter()
+        .filter(|s| s[2] > 0.0)
+        .map(|s| s[3] / s[2])
+        .collect();
+    let max_ratio = nodes_per_tile.iter().copied().fold(0.0, f64::max);
+    summary.insert("max_nodes_visited_per_tile".into(), json!(max_ratio));
+    let st = off.globe.layer().scheduler_stats();
+    summary.insert("tiles_requested".into(), json!(st.requested));
+    summary.insert("tiles_loaded".into(), json!(st.loaded));
+    summary.insert("requests_cancelled".into(), json!(st.cancelled));
+    summary.insert("adapter".into(), json!(off.ctx.adapter_description()));
+    println!("{}", serde_json::Value::Object(summary));
+    Ok(())
+}

@@ -1,0 +1,484 @@
+//! [`GlobeRenderer`]: sky and terrain in two draw calls.
+//!
+//! Per frame, in two phases:
+//! 1. [`GlobeRenderer::prepare`] (CPU): writes the frame uniforms and one instance per drawn
+//!    tile (its pool slot and its centre-to-eye offset, subtracted in f64 then rounded to f32).
+//! 2. [`GlobeRenderer::render`] (GPU): draws the sky with a full-screen triangle, then every
+//!    terrain tile with one instanced, indexed draw over the shared tile grid. The vertex
+//!    shader pulls each vertex from the pool by `slot * VERTICES_PER_TILE + vertex_index`.
+
+use std::mem::size_of;
+
+use bytemuck::{Pod, Zeroable};
+use globus_geo::{DVec3, View};
+use globus_terrain::grid::{index_count, triangle_indices};
+use globus_tiling::TileKey;
+use wgpu::util::DeviceExt;
+
+use crate::camera::CameraMatrices;
+use crate::pool::TilePool;
+use crate::shaders;
+use crate::target::DEPTH_FORMAT;
+
+/// Uniforms shared by all pipelines (mirrors `Frame` in `common.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct FrameUniforms {
+    clip_from_eye: [[f32; 4]; 4],
+    eye_from_clip: [[f32; 4]; 4],
+    eye_up_height: [f32; 4],
+    sun: [f32; 4],
+    planet: [f32; 4],
+    viewport: [f32; 4],
+}
+
+/// One drawn tile (mirrors `TileInstance` in `terrain.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct TileInstance {
+    offset: [f32; 3],
+    slot: u32,
+}
+
+/// Sun and atmosphere.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lighting {
+    /// Unit vector towards the sun, ECEF axes.
+    pub sun_direction: DVec3,
+    /// Light on faces turned away from the sun, 0..1.
+    pub ambient: f32,
+    /// Thickness of the atmosphere shell, metres.
+    pub atmosphere_m: f32,
+    /// Brightness of light scattered by the air relative to the sunlit ground.
+    pub inscatter_gain: f32,
+    /// Brightness multiplier before tone mapping.
+    pub exposure: f32,
+}
+
+impl Lighting {
+    /// A sun standing over the given longitude and latitude (radians).
+    pub fn sun_over(lon_rad: f64, lat_rad: f64) -> Self {
+        let (sl, cl) = lat_rad.sin_cos();
+        let (so, co) = lon_rad.sin_cos();
+        Self {
+            sun_direction: DVec3::new(cl * co, cl * so, sl),
+            ambient: 0.1,
+            atmosphere_m: 60_000.0,
+            inscatter_gain: 1.0,
+            exposure: 1.25,
+        }
+    }
+}
+
+/// What one frame draws.
+pub struct FrameInputs<'a> {
+    /// The camera.
+    pub view: &'a View,
+    /// Near plane distance, metres.
+    pub near_m: f64,
+    /// Height of the eye above the ellipsoid, metres (f64, for the atmosphere).
+    pub eye_height_m: f64,
+    /// Geodetic up at the eye.
+    pub eye_up: DVec3,
+    /// Mean radius of the planet, metres.
+    pub planet_radius_m: f64,
+    /// Sun and air.
+    pub lighting: Lighting,
+    /// Tiles to draw; each must be resident in the pool (others are skipped and counted).
+    pub tiles: &'a [TileKey],
+}
+
+/// What a frame cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DrawStats {
+    /// Draw calls issued (sky and terrain).
+    pub draw_calls: u32,
+    /// Terrain tiles drawn.
+    pub tiles: u32,
+    /// Triangles submitted (tiles x triangles per tile, skirts included).
+    pub triangles: u64,
+    /// Tiles asked for but not resident (drawn by nobody; should stay 0).
+    pub missing: u32,
+}
+
+/// Pipelines and per-frame buffers for drawing the globe.
+pub struct GlobeRenderer {
+    frame_buffer: wgpu::Buffer,
+    frame_bind_group: wgpu::BindGroup,
+    terrain_layout: wgpu::BindGroupLayout,
+    terrain_bind_group: Option<wgpu::BindGroup>,
+    terrain_pipeline: wgpu::RenderPipeline,
+    sky_pipeline: wgpu::RenderPipeline,
+    index_buffer: wgpu::Buffer,
+    instance_buffer: wgpu::Buffer,
+    instance_capacity: u32,
+    instances: Vec<TileInstance>,
+    sampler: wgpu::Sampler,
+    /// The GPU tile pools.
+    pub pool: TilePool,
+    stats: DrawStats,
+}
+
+impl GlobeRenderer {
+    /// Pipelines for rendering into `colour_format` with the given pool.
+    pub fn new(device: &wgpu::Device, colour_format: wgpu::TextureFormat, pool: TilePool) -> Self {
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(size_of::<FrameUniforms>() as u64),
+                },
+                count: None,
+            }],
+        });
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame uniforms"),
+            size: size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let frame_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &frame_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: frame_buffer.as_entire_binding(),
+            }],
+        });
+        let terrain_layout = terrain_bind_group_layout(device);
+        let terrain_pipeline =
+            terrain_pipeline(device, colour_format, &frame_layout, &terrain_layout);
+        let sky_pipeline = sky_pipeline(device, colour_format, &frame_layout);
+        let indices = triangle_indices();
+        let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("tile grid indices"),
+            contents: bytemuck::cast_slice(&indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("terrain colour"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            anisotropy_clamp: 8,
+            ..Default::default()
+        });
+        let instance_capacity = 256;
+        let instance_buffer = instance_buffer(device, instance_capacity);
+        Self {
+            frame_buffer,
+            frame_bind_group,
+            terrain_layout,
+            terrain_bind_group: None,
+            terrain_pipeline,
+            sky_pipeline,
+            index_buffer,
+            instance_buffer,
+            instance_capacity,
+            instances: Vec::new(),
+            sampler,
+            pool,
+            stats: DrawStats::default(),
+        }
+    }
+
+    /// CPU phase: uniforms and instances for this frame.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        inputs: &FrameInputs<'_>,
+    ) -> DrawStats {
+        let view = inputs.view;
+        let m = CameraMatrices::new(view, inputs.near_m);
+        let l = &inputs.lighting;
+        let sun = l.sun_direction.normalize_or_zero().as_vec3();
+        let up = inputs.eye_up.as_vec3();
+        let uniforms = FrameUniforms {
+            clip_from_eye: m.clip_from_eye.to_cols_array_2d(),
+            eye_from_clip: m.eye_from_clip.to_cols_array_2d(),
+            eye_up_height: [up.x, up.y, up.z, inputs.eye_height_m as f32],
+            sun: [sun.x, sun.y, sun.z, l.ambient],
+            planet: [
+                inputs.planet_radius_m as f32,
+                l.atmosphere_m,
+                l.inscatter_gain,
+                l.exposure,
+            ],
+            viewport: [
+                view.width_px as f32,
+                view.height_px as f32,
+                1.0 / view.width_px.max(1) as f32,
+                1.0 / view.height_px.max(1) as f32,
+            ],
+        };
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));
+
+        self.instances.clear();
+        let mut missing = 0;
+        for &key in inputs.tiles {
+            let Some(slot) = self.pool.slot(key) else {
+                missing += 1;
+                continue;
+            };
+            let centre = self.pool.centre(slot).unwrap_or(DVec3::ZERO);
+            // The one place a planet-sized number becomes f32: after the f64 subtraction.
+            let offset = (centre - view.position).as_vec3();
+            self.instances.push(TileInstance {
+                offset: offset.to_array(),
+                slot,
+            });
+        }
+        let count = self.instances.len() as u32;
+        if count > self.instance_capacity || self.terrain_bind_group.is_none() {
+            if count > self.instance_capacity {
+                self.instance_capacity = count.next_power_of_two();
+                self.instance_buffer = instance_buffer(device, self.instance_capacity);
+            }
+            self.terrain_bind_group = Some(self.terrain_bind_group(device));
+        }
+        if !self.instances.is_empty() {
+            queue.write_buffer(
+                &self.instance_buffer,
+                0,
+                bytemuck::cast_slice(&self.instances),
+            );
+        }
+        let triangles_per_tile = u64::from(index_count() / 3);
+        self.stats = DrawStats {
+            draw_calls: if count > 0 { 2 } else { 1 },
+            tiles: count,
+            triangles: u64::from(count) * triangles_per_tile,
+            missing,
+        };
+        self.stats
+    }
+
+    /// GPU phase: records the sky and terrain draws into `encoder`.
+    pub fn render(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        colour: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("globe"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: colour,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                // Reversed-Z: 0 is infinitely far.
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &self.frame_bind_group, &[]);
+        pass.set_pipeline(&self.sky_pipeline);
+        pass.draw(0..3, 0..1);
+        if let Some(bind_group) = &self.terrain_bind_group
+            && !self.instances.is_empty()
+        {
+            pass.set_pipeline(&self.terrain_pipeline);
+            pass.set_bind_group(1, bind_group, &[]);
+            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..index_count(), 0, 0..self.instances.len() as u32);
+        }
+    }
+
+    /// The stats of the last [`GlobeRenderer::prepare`].
+    pub fn stats(&self) -> DrawStats {
+        self.stats
+    }
+
+    fn terrain_bind_group(&self, device: &wgpu::Device) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("terrain"),
+            layout: &self.terrain_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.pool.vertex_buffer().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.instance_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(self.pool.colour_view()),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+            ],
+        })
+    }
+}
+
+fn instance_buffer(device: &wgpu::Device, capacity: u32) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("tile instances"),
+        size: u64::from(capacity) * size_of::<TileInstance>() as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("terrain"),
+        entries: &[
+            storage_entry(0),
+            storage_entry(1),
+            wgpu::BindGroupLayoutEntry {
+                binding: 2,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2Array,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ],
+    })
+}
+
+fn terrain_pipeline(
+    device: &wgpu::Device,
+    format: wgpu::TextureFormat,
+    frame_layout: &wgpu::BindGroupLayout,
+    terrain_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("terrain"),
+        source: wgpu::ShaderSource::Wgsl(shaders::TERRAIN.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("terrain"),
+        bind_group_layouts: &[Some(frame_layout), Some(terrain_layout)],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("terrain"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: Some(wgpu::Face::Back),
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+fn sky_pipeline(
+    device: &wgpu::Device,
+    format: wgpu::TextureFormat,
+    frame_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("sky"),
+        source: wgpu::ShaderSource::Wgsl(shaders::SKY.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("sky"),
+        bind_group_layouts: &[Some(frame_layout)],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("sky"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_sky"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Always),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_sky"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}

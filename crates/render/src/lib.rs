@@ -1,0 +1,25 @@
+//! `globus-render`: the render side of Globus, and the only crate (with the app) that knows
+//! wgpu.
+//!
+//! * [`GpuContext`]: instance, adapter, device and queue, with or without a window.
+//! * [`TilePool`]: fixed GPU slot arrays (a vertex pool and a colour texture array) mirroring
+//!   the CPU tile cache, with least-recently-used eviction and an upload budget per frame.
+//! * [`GlobeRenderer`]: draws the sky and all terrain tiles with two draw calls, whatever the
+//!   number of tiles: one instanced draw over the shared tile grid, vertex data pulled from the
+//!   pool by slot. Positions are f32 offsets from each tile's centre plus a centre-to-eye
+//!   offset computed in f64 every frame (camera-relative rendering), and depth is reversed-Z
+//!   with an infinite far plane in a 32-bit float buffer.
+//! * [`OffscreenTarget`]: rendering without a window, read back as RGBA.
+
+mod camera;
+mod context;
+mod globe;
+mod pool;
+pub mod shaders;
+mod target;
+
+pub use camera::{CameraMatrices, near_plane_m};
+pub use context::{GpuContext, RenderError};
+pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting};
+pub use pool::{PoolStats, TilePool, TilePoolOptions};
+pub use target::{DEPTH_FORMAT, DepthTarget, OffscreenTarget, RgbaImage};

@@ -1,0 +1,155 @@
+//! A least-recently-used cache with a byte budget (Zeitler 2015, section 4.8), keyed by tile.
+//!
+//! "Recently used" is a frame stamp set with [`LruCache::touch`]; eviction removes the oldest
+//! entries that the caller does not protect until the cache fits its budget. Entries in use
+//! this frame are never evicted, so the cache may stay over budget while the view needs more
+//! than it holds: [`LruCache::is_over_budget`] tells the engine to lower detail.
+
+use globus_tiling::TileKey;
+use rustc_hash::FxHashMap;
+
+struct Entry<V> {
+    value: V,
+    bytes: usize,
+    last_used: u64,
+}
+
+/// A byte-budgeted LRU map from tile keys to values.
+pub struct LruCache<V> {
+    map: FxHashMap<TileKey, Entry<V>>,
+    bytes: usize,
+    budget: usize,
+}
+
+impl<V> LruCache<V> {
+    /// An empty cache that tries to hold at most `budget_bytes`.
+    pub fn new(budget_bytes: usize) -> Self {
+        Self {
+            map: FxHashMap::default(),
+            bytes: 0,
+            budget: budget_bytes,
+        }
+    }
+
+    /// Inserts (or replaces) a value of `bytes` bytes, used at frame `now`.
+    pub fn insert(&mut self, key: TileKey, value: V, bytes: usize, now: u64) {
+        if let Some(old) = self.map.insert(
+            key,
+            Entry {
+                value,
+                bytes,
+                last_used: now,
+            },
+        ) {
+            self.bytes -= old.bytes;
+        }
+        self.bytes += bytes;
+    }
+
+    /// The value for `key`.
+    pub fn get(&self, key: TileKey) -> Option<&V> {
+        self.map.get(&key).map(|e| &e.value)
+    }
+
+    /// Whether `key` is cached.
+    pub fn contains(&self, key: TileKey) -> bool {
+        self.map.contains_key(&key)
+    }
+
+    /// Marks `key` used at frame `now`; returns false if it is not cached or was already
+    /// touched at `now`.
+    pub fn touch(&mut self, key: TileKey, now: u64) -> bool {
+        match self.map.get_mut(&key) {
+            Some(e) if e.last_used != now => {
+                e.last_used = now;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Evicts least recently used entries, skipping those for which `protect(key, last_used)`
+    /// is true, until the cache fits its budget. Returns the evicted keys.
+    pub fn evict_to_budget(&mut self, protect: impl Fn(TileKey, u64) -> bool) -> Vec<TileKey> {
+        if self.bytes <= self.budget {
+            return Vec::new();
+        }
+        let mut candidates: Vec<(u64, TileKey)> = self
+            .map
+            .iter()
+            .filter(|(k, e)| !protect(**k, e.last_used))
+            .map(|(k, e)| (e.last_used, *k))
+            .collect();
+        candidates.sort_unstable();
+        let mut evicted = Vec::new();
+        for (_, key) in candidates {
+            if self.bytes <= self.budget {
+                break;
+            }
+            if let Some(e) = self.map.remove(&key) {
+                self.bytes -= e.bytes;
+                evicted.push(key);
+            }
+        }
+        evicted
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.bytes
+    }
+
+    /// The budget, bytes.
+    pub fn budget(&self) -> usize {
+        self.budget
+    }
+
+    /// Whether the cache holds more than its budget.
+    pub fn is_over_budget(&self) -> bool {
+        self.bytes > self.budget
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    /// Whether the cache is empty.
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn k(x: u32) -> TileKey {
+        TileKey::new(10, x, 0)
+    }
+
+    #[test]
+    fn evicts_oldest_first_and_respects_protection() {
+        let mut c = LruCache::new(30);
+        for x in 0..5 {
+            c.insert(k(x), x, 10, u64::from(x));
+        }
+        assert_eq!(c.bytes(), 50);
+        c.touch(k(0), 9);
+        let evicted = c.evict_to_budget(|key, _| key == k(1));
+        assert_eq!(evicted, vec![k(2), k(3)]);
+        assert!(c.contains(k(0)) && c.contains(k(1)) && c.contains(k(4)));
+        assert_eq!(c.bytes(), 30);
+    }
+
+    #[test]
+    fn stays_over_budget_when_everything_is_protected() {
+        let mut c = LruCache::new(5);
+        c.insert(k(1), (), 10, 1);
+        assert!(c.evict_to_budget(|_, _| true).is_empty());
+        assert!(c.is_over_budget());
+        c.insert(k(1), (), 4, 2);
+        assert_eq!(c.bytes(), 4);
+        assert!(!c.is_over_budget());
+    }
+}

@@ -1,0 +1,20 @@
+//! `globus-stream`: the data side of Globus.
+//!
+//! Tiles come from a [`TileSource`] (today the procedural planet; later directories, tile
+//! services and archives), slowly and maybe never. A [`Scheduler`] runs loads on a small pool
+//! of worker threads in priority order, drops requests nobody wants any more, and hands
+//! results back through a bounded channel that the render thread drains without blocking.
+//! A [`TerrainLayer`] keeps loaded tiles in a byte-budgeted LRU cache and answers LOD
+//! selection's questions as a [`globus_tiling::TileOracle`].
+
+mod cache;
+mod layer;
+mod procedural;
+mod scheduler;
+mod source;
+
+pub use cache::LruCache;
+pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
+pub use procedural::{ProceduralSource, child_bounds};
+pub use scheduler::{Scheduler, SchedulerStats};
+pub use source::{SourceError, TerrainData, TerrainSource, TileSource};

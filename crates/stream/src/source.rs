@@ -1,0 +1,74 @@
+//! The [`TileSource`] trait: where tiles come from.
+
+use globus_geo::Ellipsoid;
+use globus_terrain::{TerrainTile, TileMesh};
+use globus_tiling::{TileBounds, TileKey, TilingScheme};
+
+/// Why a tile could not be loaded. Every error names the tile and the source.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SourceError {
+    /// The source failed to produce the tile.
+    #[error("tile {key} from {source_name}: {message}")]
+    Failed {
+        /// The tile.
+        key: TileKey,
+        /// The source's name.
+        source_name: String,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// A provider of tiles, called on worker threads. Loads must not panic; a panic is still
+/// caught and reported as a failure of that tile.
+pub trait TileSource: Send + Sync + 'static {
+    /// What a loaded tile is.
+    type Tile: Send + Sync + 'static;
+    /// A short name for logs and errors (a path, URL or "procedural seed 1").
+    fn name(&self) -> &str;
+    /// The tiling scheme of the keys.
+    fn scheme(&self) -> TilingScheme;
+    /// Loads a tile. `Ok(None)` means the source has no data there (stop refining).
+    fn load(&self, key: TileKey) -> Result<Option<Self::Tile>, SourceError>;
+    /// Bytes a loaded tile holds in memory, for cache budgets.
+    fn byte_size(&self, tile: &Self::Tile) -> usize;
+}
+
+/// A source of terrain tiles, with what the engine must know before any tile is loaded.
+pub trait TerrainSource: TileSource<Tile = TerrainData> {
+    /// The body the terrain is on.
+    fn ellipsoid(&self) -> &Ellipsoid;
+    /// A body guaranteed to be below every terrain point (for horizon culling).
+    fn occluder(&self) -> &Ellipsoid;
+    /// The lowest and highest terrain heights, metres.
+    fn height_range_m(&self) -> (f64, f64);
+    /// The deepest level with data.
+    fn max_level(&self) -> u8;
+    /// The full-resolution surface height at a longitude and latitude (radians), metres, if
+    /// the source can answer without loading tiles (a procedural source can; an archive
+    /// cannot, and the engine then reads its loaded tiles).
+    fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
+        let _ = (lon_rad, lat_rad);
+        None
+    }
+}
+
+/// A terrain tile ready for selection and rendering: its data, its mesh, and conservative
+/// bounds for its four children (so they can be culled before they are loaded).
+#[derive(Debug)]
+pub struct TerrainData {
+    /// Heights, colour and errors.
+    pub tile: TerrainTile,
+    /// Vertices and exact bounds.
+    pub mesh: TileMesh,
+    /// Bounds for children NW, NE, SW, SE, from this tile's heights in each quadrant widened
+    /// by this tile's geometric error.
+    pub child_bounds: [TileBounds; 4],
+}
+
+impl TerrainData {
+    /// Bytes held.
+    pub fn byte_size(&self) -> usize {
+        self.tile.byte_size() + self.mesh.byte_size() + std::mem::size_of::<Self>()
+    }
+}

@@ -1,0 +1,72 @@
+//! Micro-benchmarks of the procedural terrain: noise octaves, tile generation, meshes.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use globus_geo::DVec3;
+use globus_terrain::noise::Octaves;
+use std::hint::black_box;
+
+fn noise(c: &mut Criterion) {
+    let o = Octaves::new(1, 1000.0, 1);
+    c.bench_function("octave", |b| {
+        let mut p = DVec3::new(6_378_137.0, 1234.5, 777.0);
+        b.iter(|| {
+            p.x += 0.37;
+            black_box(o.octave(0, black_box(p)))
+        })
+    });
+}
+
+criterion_group!(benches, noise);
+
+fn noise_throughput(c: &mut Criterion) {
+    let o = Octaves::new(1, 1000.0, 1);
+    let pts: Vec<DVec3> = (0..1024)
+        .map(|i| DVec3::new(6_378_137.0 + i as f64 * 0.37, 1234.5 + i as f64, 777.0))
+        .collect();
+    c.bench_function("octave x1024", |b| {
+        b.iter(|| {
+            let mut s = 0.0;
+            for p in &pts {
+                s += o.octave(0, *p);
+            }
+            black_box(s)
+        })
+    });
+    c.bench_function("raw noise x1024", |b| {
+        b.iter(|| {
+            let mut s = 0.0;
+            for p in &pts {
+                s += globus_terrain::noise::gradient_noise(*p * 0.001, 5);
+            }
+            black_box(s)
+        })
+    });
+}
+criterion_group!(more, noise_throughput);
+criterion_main!(benches, more, tilegen);
+
+fn tiles(c: &mut Criterion) {
+    use globus_terrain::{ProceduralPlanet, TileMesh};
+    use globus_tiling::TileKey;
+    let planet = ProceduralPlanet::new(1);
+    for key in [
+        TileKey::new(3, 8, 2),
+        TileKey::new(12, 2_134, 1_000),
+        TileKey::new(24, 8_700_000, 4_100_000),
+    ] {
+        c.bench_function(&format!("generate_tile level {}", key.level()), |b| {
+            b.iter(|| black_box(planet.generate_tile(black_box(key))))
+        });
+    }
+    let tile = planet.generate_tile(TileKey::new(12, 2_134, 1_000));
+    c.bench_function("build_mesh", |b| {
+        b.iter(|| {
+            black_box(TileMesh::build(
+                &tile,
+                &globus_geo::Ellipsoid::WGS84,
+                &globus_geo::Ellipsoid::WGS84,
+            ))
+        })
+    });
+}
+criterion_group!(tilegen, tiles);

@@ -1,0 +1,525 @@
+//! Generating one tile of the procedural planet.
+//!
+//! A tile is evaluated on two grids over its rectangle:
+//!
+//! ```text
+//!  coarse grid: the 33 x 33 mesh vertices plus two rings (37 x 37, indices -2..=34)
+//!  fine grid:   4x denser, 129 x 129 plus one ring (131 x 131, indices -1..=129)
+//! ```
+//!
+//! The continent-scale fields and every relief octave whose wavelength is at least half the
+//! tile (16 mesh cells) are evaluated on the coarse grid and carried to the fine grid by
+//! Catmull-Rom interpolation (for a wavelength of 16 cells its error is below 2e-4 of the
+//! octave's amplitude). The remaining octaves, down to twice the fine spacing, are evaluated
+//! at every fine sample. Octaves finer than that are left out and their largest possible
+//! contribution is added to the tile's geometric error. Mesh vertices are fine samples
+//! (every 4th); the outer ring of the height grid is evaluated directly.
+//!
+//! Which octaves are used depends only on the tile's level, and positions on a shared edge
+//! are computed from the shared edge coordinates, so neighbours at the same level produce
+//! bit-identical edge heights. Interpolation along an edge uses only edge samples, which
+//! keeps that true for the interpolated part as well.
+
+use globus_geo::{Cartographic, DVec3};
+use globus_tiling::{GeoRect, TileKey, TilingScheme};
+
+use crate::biome::{self, Surface};
+use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
+use crate::planet::{Fields, ProceduralPlanet, Relief};
+use crate::tile::{ColourImage, TerrainTile};
+
+/// Fine samples per mesh cell.
+const OVERSAMPLE: i32 = 4;
+/// Fine cells per tile side (equal to the colour size: one texel per fine cell).
+const FINE: i32 = MESH_SEGMENTS as i32 * OVERSAMPLE;
+/// Coarse grid: mesh indices -2..=34.
+const COARSE_LO: i32 = -2;
+const COARSE_SIDE: usize = MESH_SEGMENTS as usize + 5;
+/// Fine grid: fine indices -1..=129.
+const FINE_LO: i32 = -1;
+const FINE_SIDE: usize = FINE as usize + 3;
+
+/// Wavelength of the vegetation patch field, metres (see [`ProceduralPlanet::patches`]).
+const PATCH_WAVELENGTH_M: f64 = 8_000.0;
+
+/// Octaves at least this many mesh cells long are evaluated on the coarse grid.
+const COARSE_OCTAVE_CELLS: f64 = 16.0;
+
+/// Quantities carried from the coarse to the fine grid.
+#[derive(Clone, Copy, Default)]
+struct Coarse {
+    fields: Fields,
+    patches: f64,
+    /// Sum of the coarse relief octaves, metres.
+    relief_m: f64,
+    /// Colour texture from the coarse detail octaves (see [`texture_weight`]).
+    texture: f64,
+}
+
+impl Coarse {
+    fn weighted_sum(items: [(&Coarse, f64); 4]) -> Coarse {
+        let mut out = Coarse::default();
+        for (c, w) in items {
+            out.fields.base_m += w * c.fields.base_m;
+            out.fields.mountains += w * c.fields.mountains;
+            out.fields.roughness += w * c.fields.roughness;
+            out.fields.moisture += w * c.fields.moisture;
+            out.patches += w * c.patches;
+            out.relief_m += w * c.relief_m;
+            out.texture += w * c.texture;
+        }
+        // Cubic interpolation can overshoot slightly; weights stay non-negative.
+        out.fields.mountains = out.fields.mountains.max(0.0);
+        out.fields.roughness = out.fields.roughness.max(0.0);
+        out
+    }
+}
+
+/// A point of a grid: the surface point, its up vector and latitude.
+#[derive(Clone, Copy, Default)]
+struct GridPoint {
+    surface: DVec3,
+    up: DVec3,
+    lat_rad: f64,
+}
+
+/// How the octaves of one level are split between the grids.
+struct OctavePlan {
+    /// Octaves on the coarse grid, with their amplitudes (metres at weight 1) and texture
+    /// weights.
+    coarse: Vec<(Relief, f64, f64)>,
+    /// Octaves at every fine sample, likewise.
+    fine: Vec<(Relief, f64, f64)>,
+    /// Octaves shorter than this are left out, metres.
+    finest_m: f64,
+    /// Weight of the vegetation patch field: faded out where the coarse grid is too sparse
+    /// to sample its 8 km wavelength (it would alias into blotches).
+    patch_weight: f64,
+}
+
+/// How much an octave's shape varies the ground colour. Detail octaves up to 20 km each add
+/// the same small variation, whatever the level: a coarse tile shows the average of what its
+/// children show (the finer octaves average out), so colours match across LOD changes while
+/// every zoom level adds texture at its own scale.
+fn texture_weight(planet: &ProceduralPlanet, r: Relief) -> f64 {
+    match r {
+        Relief::Detail(_) if planet.wavelength_m(r) <= 20_000.0 => 0.09,
+        _ => 0.0,
+    }
+}
+
+impl OctavePlan {
+    fn for_tile(planet: &ProceduralPlanet, tile_ns_m: f64) -> Self {
+        let mesh_spacing = tile_ns_m / f64::from(MESH_SEGMENTS);
+        let fine_spacing = mesh_spacing / f64::from(OVERSAMPLE);
+        let finest_m = 2.0 * fine_spacing;
+        let split = COARSE_OCTAVE_CELLS * mesh_spacing;
+        let mut coarse = Vec::new();
+        let mut fine = Vec::new();
+        for r in planet.relief_octaves() {
+            let wl = planet.wavelength_m(r);
+            let entry = (r, planet.amplitude_m(r), texture_weight(planet, r));
+            if wl >= split {
+                coarse.push(entry);
+            } else if wl >= finest_m {
+                fine.push(entry);
+            }
+        }
+        let patch_weight = crate::planet::smoothstep(2.0, 6.0, PATCH_WAVELENGTH_M / mesh_spacing);
+        Self {
+            coarse,
+            fine,
+            finest_m,
+            patch_weight,
+        }
+    }
+}
+
+/// Catmull-Rom weights for fraction `t` of the interval between samples 0 and 1
+/// (samples -1, 0, 1, 2).
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+/// `a` at t = 0 and `b` at t = 1 exactly (so shared edges are bit-identical).
+fn lerp_exact(a: f64, b: f64, t: f64) -> f64 {
+    a * (1.0 - t) + b * t
+}
+
+impl ProceduralPlanet {
+    /// Generates the terrain tile `key` of the geographic tiling scheme.
+    pub fn generate_tile(&self, key: TileKey) -> TerrainTile {
+        let rect = TilingScheme::Geographic.rect(key);
+        let tile_ns_m = rect.height() * self.ellipsoid().mean_radius();
+        let plan = OctavePlan::for_tile(self, tile_ns_m);
+        let coarse_pts = self.grid_points(&rect, COARSE_LO, COARSE_SIDE, MESH_SEGMENTS as i32);
+        let fine_pts = self.grid_points(&rect, FINE_LO, FINE_SIDE, FINE);
+        let coarse = self.evaluate_coarse(&coarse_pts, &plan);
+        let fine_coarse = upsample(&coarse);
+        // Fine heights (raw, negative under water) and the colour texture.
+        let mut raw = vec![0.0; FINE_SIDE * FINE_SIDE];
+        let mut micro = vec![0.0; FINE_SIDE * FINE_SIDE];
+        for (idx, pt) in fine_pts.iter().enumerate() {
+            let c = &fine_coarse[idx];
+            let (fine_m, texture) = self.fine_relief(&plan, &c.fields, pt.surface);
+            raw[idx] = c.fields.base_m + c.relief_m + fine_m;
+            micro[idx] = (c.texture + texture).clamp(-1.0, 1.0);
+        }
+        let heights_m = self.mesh_heights(&coarse, &coarse_pts, &raw, &plan);
+        let rendered: Vec<f64> = raw.iter().map(|h| h.max(0.0)).collect();
+        let max_weight = coarse
+            .iter()
+            .map(|c| c.fields.roughness.max(c.fields.mountains))
+            .fold(0.0, f64::max);
+        let mesh_error = mesh_deviation(&heights_m, &rendered);
+        let bulge = self.mesh_bulge_m(&rect);
+        let omitted = self.omitted_amplitude_m(plan.finest_m, max_weight);
+        let colour = self.colour_image(&fine_pts, &fine_coarse, &raw, &rendered, &micro);
+        let (min_h, max_h) = heights_m
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(f64::from(h)), hi.max(f64::from(h)))
+            });
+        TerrainTile {
+            key,
+            rect,
+            heights_m,
+            colour,
+            geometric_error_m: mesh_error + bulge + omitted,
+            texel_size_m: tile_ns_m / f64::from(COLOUR_SIZE),
+            min_height_m: min_h,
+            max_height_m: max_h,
+        }
+    }
+
+    /// Surface points of a `side` x `side` grid starting at index `lo`, with `cells` cells
+    /// across the rectangle (index 0 on the west/north edge, `cells` on the east/south edge).
+    fn grid_points(&self, rect: &GeoRect, lo: i32, side: usize, cells: i32) -> Vec<GridPoint> {
+        let e = self.ellipsoid();
+        let lons: Vec<f64> = (0..side)
+            .map(|i| {
+                lerp_exact(
+                    rect.west,
+                    rect.east,
+                    f64::from(lo + i as i32) / f64::from(cells),
+                )
+            })
+            .collect();
+        let mut out = Vec::with_capacity(side * side);
+        for j in 0..side {
+            let lat = lerp_exact(
+                rect.north,
+                rect.south,
+                f64::from(lo + j as i32) / f64::from(cells),
+            );
+            for &lon in &lons {
+                let c = Cartographic::new(lon, lat, 0.0);
+                out.push(GridPoint {
+                    surface: e.cartographic_to_ecef(c),
+                    up: e.geodetic_normal_from_lon_lat(lon, lat),
+                    lat_rad: lat,
+                });
+            }
+        }
+        out
+    }
+
+    fn evaluate_coarse(&self, pts: &[GridPoint], plan: &OctavePlan) -> Vec<Coarse> {
+        pts.iter()
+            .map(|pt| {
+                let fields = self.fields(pt.surface);
+                let (relief_m, texture) = self.relief_sum(&plan.coarse, &fields, pt.surface);
+                Coarse {
+                    fields,
+                    patches: self.patches(pt.surface) * plan.patch_weight,
+                    relief_m,
+                    texture,
+                }
+            })
+            .collect()
+    }
+
+    /// Relief (metres) and colour texture of the fine octaves at `p`.
+    #[inline]
+    fn fine_relief(&self, plan: &OctavePlan, fields: &Fields, p: DVec3) -> (f64, f64) {
+        self.relief_sum(&plan.fine, fields, p)
+    }
+
+    /// Sum of the given octaves' relief (metres) and colour texture at `p`.
+    #[inline]
+    fn relief_sum(&self, octaves: &[(Relief, f64, f64)], fields: &Fields, p: DVec3) -> (f64, f64) {
+        let mut height = 0.0;
+        let mut texture = 0.0;
+        for &(r, a, t) in octaves {
+            let shape = self.relief_shape(r, p);
+            height += a * Self::relief_weight(r, fields) * shape;
+            texture += t * shape;
+        }
+        (height, texture)
+    }
+
+    /// The height grid with its border ring: interior vertices are fine samples, the ring is
+    /// evaluated directly at its coarse-grid points.
+    fn mesh_heights(
+        &self,
+        coarse: &[Coarse],
+        coarse_pts: &[GridPoint],
+        raw: &[f64],
+        plan: &OctavePlan,
+    ) -> Vec<f32> {
+        let side = HEIGHT_GRID_SIDE as i32;
+        let mut out = Vec::with_capacity(HEIGHT_GRID_SIDE * HEIGHT_GRID_SIDE);
+        for j in -1..side - 1 {
+            for i in -1..side - 1 {
+                let interior = (0..=MESH_SEGMENTS as i32).contains(&i)
+                    && (0..=MESH_SEGMENTS as i32).contains(&j);
+                let h = if interior {
+                    raw[fine_index(i * OVERSAMPLE, j * OVERSAMPLE)]
+                } else {
+                    let ci = coarse_index(i, j);
+                    let c = &coarse[ci];
+                    c.fields.base_m
+                        + c.relief_m
+                        + self.fine_relief(plan, &c.fields, coarse_pts[ci].surface).0
+                };
+                out.push(h.max(0.0) as f32);
+            }
+        }
+        out
+    }
+
+    /// How far the flat triangles between mesh vertices sag below the curved ellipsoid:
+    /// `d^2 / (8 r)` for the cell diagonal `d` and the largest radius of curvature `r`.
+    fn mesh_bulge_m(&self, rect: &GeoRect) -> f64 {
+        let e = self.ellipsoid();
+        let r_max = e.maximum_radius() * e.maximum_radius() / e.minimum_radius();
+        let cos_lat = rect.north.abs().min(rect.south.abs()).cos();
+        let ns = rect.height() / f64::from(MESH_SEGMENTS) * r_max;
+        let ew = rect.width() / f64::from(MESH_SEGMENTS) * r_max * cos_lat;
+        (ns * ns + ew * ew) / (8.0 * r_max)
+    }
+
+    fn colour_image(
+        &self,
+        pts: &[GridPoint],
+        coarse: &[Coarse],
+        raw: &[f64],
+        rendered: &[f64],
+        micro: &[f64],
+    ) -> ColourImage {
+        // Normals of the rendered surface at fine samples 0..=FINE (central differences).
+        let n = FINE as usize + 1;
+        let mut slope_cos = vec![1.0; n * n];
+        let pos = |i: i32, j: i32| {
+            let k = fine_index(i, j);
+            pts[k].surface + pts[k].up * rendered[k]
+        };
+        for j in 0..=FINE {
+            for i in 0..=FINE {
+                let east = pos(i + 1, j) - pos(i - 1, j);
+                let south = pos(i, j + 1) - pos(i, j - 1);
+                let up = pts[fine_index(i, j)].up;
+                slope_cos[j as usize * n + i as usize] = south
+                    .cross(east)
+                    .try_normalize()
+                    .map_or(1.0, |nrm| nrm.dot(up));
+            }
+        }
+        let size = COLOUR_SIZE as usize;
+        let mut px = vec![0u8; size * size * 4];
+        for ty in 0..size {
+            for tx in 0..size {
+                let mut s = Surface::default();
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (i, j) = ((tx + dx) as i32, (ty + dy) as i32);
+                    let k = fine_index(i, j);
+                    s.height_m += raw[k] * 0.25;
+                    s.slope_cos += slope_cos[(ty + dy) * n + tx + dx] * 0.25;
+                    s.abs_lat_rad += pts[k].lat_rad.abs() * 0.25;
+                    s.moisture += coarse[k].fields.moisture * 0.25;
+                    s.patches += coarse[k].patches * 0.25;
+                    s.micro += micro[k] * 0.25;
+                }
+                let c = biome::colour(&s);
+                px[(ty * size + tx) * 4..][..4].copy_from_slice(&c);
+            }
+        }
+        ColourImage::with_mips(COLOUR_SIZE, px)
+    }
+}
+
+fn fine_index(i: i32, j: i32) -> usize {
+    (j - FINE_LO) as usize * FINE_SIDE + (i - FINE_LO) as usize
+}
+
+fn coarse_index(i: i32, j: i32) -> usize {
+    (j - COARSE_LO) as usize * COARSE_SIDE + (i - COARSE_LO) as usize
+}
+
+/// Catmull-Rom upsampling of the coarse quantities onto the fine grid (rows, then columns).
+fn upsample(coarse: &[Coarse]) -> Vec<Coarse> {
+    // For each fine index: the first of the four coarse indices and the weights.
+    let taps: Vec<(i32, [f64; 4])> = (0..FINE_SIDE as i32)
+        .map(|f| {
+            let fi = f + FINE_LO;
+            let base = fi.div_euclid(OVERSAMPLE);
+            let t = f64::from(fi.rem_euclid(OVERSAMPLE)) / f64::from(OVERSAMPLE);
+            (base - 1, catmull_rom(t))
+        })
+        .collect();
+    let mut rows = vec![Coarse::default(); COARSE_SIDE * FINE_SIDE];
+    for cj in 0..COARSE_SIDE {
+        for (fi, (first, w)) in taps.iter().enumerate() {
+            let at = |k: usize| &coarse[cj * COARSE_SIDE + (first + k as i32 - COARSE_LO) as usize];
+            rows[cj * FINE_SIDE + fi] =
+                Coarse::weighted_sum([(at(0), w[0]), (at(1), w[1]), (at(2), w[2]), (at(3), w[3])]);
+        }
+    }
+    let mut out = vec![Coarse::default(); FINE_SIDE * FINE_SIDE];
+    for (fj, (first, w)) in taps.iter().enumerate() {
+        for fi in 0..FINE_SIDE {
+            let at = |k: usize| &rows[(first + k as i32 - COARSE_LO) as usize * FINE_SIDE + fi];
+            out[fj * FINE_SIDE + fi] =
+                Coarse::weighted_sum([(at(0), w[0]), (at(1), w[1]), (at(2), w[2]), (at(3), w[3])]);
+        }
+    }
+    out
+}
+
+/// Largest difference between the fine samples and the mesh drawn through the vertices.
+fn mesh_deviation(heights_m: &[f32], fine: &[f64]) -> f64 {
+    let h = |i: i32, j: i32| {
+        f64::from(heights_m[((j + 1) as usize) * HEIGHT_GRID_SIDE + (i + 1) as usize])
+    };
+    let mut worst: f64 = 0.0;
+    for cj in 0..MESH_SEGMENTS as i32 {
+        for ci in 0..MESH_SEGMENTS as i32 {
+            let (nw, ne, sw, se) = (h(ci, cj), h(ci + 1, cj), h(ci, cj + 1), h(ci + 1, cj + 1));
+            for dj in 0..=OVERSAMPLE {
+                for di in 0..=OVERSAMPLE {
+                    let s = f64::from(di) / f64::from(OVERSAMPLE);
+                    let t = f64::from(dj) / f64::from(OVERSAMPLE);
+                    let mesh = interpolate_in_cell(nw, ne, sw, se, s, t);
+                    let f = fine[fine_index(ci * OVERSAMPLE + di, cj * OVERSAMPLE + dj)];
+                    worst = worst.max((f - mesh).abs());
+                }
+            }
+        }
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::MESH_SIDE;
+
+    #[test]
+    fn catmull_rom_weights_sum_to_one_and_interpolate() {
+        for t in [0.0, 0.25, 0.5, 0.75] {
+            let w = catmull_rom(t);
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn neighbours_share_edge_heights_exactly() {
+        let planet = ProceduralPlanet::new(11);
+        for (a, b, horizontal) in [
+            (TileKey::new(9, 533, 110), TileKey::new(9, 534, 110), true),
+            (
+                TileKey::new(14, 17_000, 4_000),
+                TileKey::new(14, 17_000, 4_001),
+                false,
+            ),
+            // Across the antimeridian.
+            (TileKey::new(6, 127, 20), TileKey::new(6, 0, 20), true),
+        ] {
+            let ta = planet.generate_tile(a);
+            let tb = planet.generate_tile(b);
+            let last = MESH_SEGMENTS as i32;
+            for k in 0..MESH_SIDE as i32 {
+                let (ha, hb) = if horizontal {
+                    (ta.height_at(last, k), tb.height_at(0, k))
+                } else {
+                    (ta.height_at(k, last), tb.height_at(k, 0))
+                };
+                if a.x() == 127 {
+                    // 180 E and 180 W are the same meridian but computed from different
+                    // longitudes: equal to rounding.
+                    assert!((ha - hb).abs() < 1e-3, "{a:?}|{b:?} at {k}: {ha} vs {hb}");
+                } else {
+                    assert_eq!(ha, hb, "{a:?}|{b:?} at {k}");
+                }
+            }
+            // The border ring holds the neighbour's next row of vertices.
+            let (ra, rb) = if horizontal {
+                (ta.height_at(last + 1, 5), tb.height_at(1, 5))
+            } else {
+                (ta.height_at(5, last + 1), tb.height_at(5, 1))
+            };
+            assert!(
+                (ra - rb).abs() < 0.01 + 1e-3 * ra.abs(),
+                "ring {ra} vs {rb}"
+            );
+        }
+    }
+
+    #[test]
+    fn heights_match_direct_evaluation() {
+        let planet = ProceduralPlanet::new(2);
+        for key in [
+            TileKey::new(3, 4, 2),
+            TileKey::new(12, 2_170, 980),
+            TileKey::new(20, 1_110_000, 480_000),
+        ] {
+            let t = planet.generate_tile(key);
+            let rect = t.rect;
+            let tile_ns_m = rect.height() * planet.ellipsoid().mean_radius();
+            let finest = 2.0 * tile_ns_m / f64::from(FINE);
+            for (i, j) in [(0, 0), (7, 19), (32, 32), (16, 3)] {
+                let lon = lerp_exact(rect.west, rect.east, f64::from(i) / 32.0);
+                let lat = lerp_exact(rect.north, rect.south, f64::from(j) / 32.0);
+                let p = planet
+                    .ellipsoid()
+                    .cartographic_to_ecef(Cartographic::new(lon, lat, 0.0));
+                let direct = planet.height_m(p, finest).max(0.0);
+                let got = f64::from(t.height_at(i, j));
+                // Coarse octaves are interpolated between vertices but exact on them, and the
+                // fields are exact on vertices too: only f32 storage rounds.
+                assert!(
+                    (got - direct).abs() < 1e-3 + 1e-6 * direct.abs(),
+                    "{key:?} ({i},{j}): {got} vs {direct}"
+                );
+            }
+            assert!(t.geometric_error_m > 0.0);
+        }
+    }
+
+    #[test]
+    fn geometric_error_shrinks_with_level() {
+        let planet = ProceduralPlanet::new(4);
+        let mut key = TileKey::new(22, 4_350_000, 1_150_000);
+        let mut errors = Vec::new();
+        while let Some(p) = key.parent() {
+            if key.level() % 4 == 2 {
+                errors.push(planet.generate_tile(key).geometric_error_m);
+            }
+            key = p;
+        }
+        for w in errors.windows(2) {
+            assert!(
+                w[0] < w[1],
+                "deeper tiles must be more accurate: {errors:?}"
+            );
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! `globus-terrain`: terrain on the CPU, no GPU code.
+//!
+//! * [`ProceduralPlanet`]: the default data source, an Earth-sized planet with oceans,
+//!   continents, mountain ranges and detail down to 0.15 m, deterministic for a seed.
+//! * [`TerrainTile`]: one tile's height grid (with a border), colour image and errors.
+//! * [`TileMesh`]: the tile's vertices relative to its own origin (f32) plus normals, skirts
+//!   and exact bounds, ready to upload.
+//! * [`grid`]: the vertex layout and triangulation every tile shares.
+
+pub mod biome;
+mod generate;
+pub mod grid;
+mod mesh;
+pub mod noise;
+mod planet;
+mod tile;
+
+pub use mesh::{TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
+pub use planet::{Fields, ProceduralPlanet, Relief};
+pub use tile::{ColourImage, TerrainTile};

@@ -1,0 +1,369 @@
+//! The procedural planet: a height and surface model defined in 3D on the ellipsoid.
+//!
+//! Every quantity is a function of the ECEF point on the ellipsoid surface (f64 metres), never
+//! of longitude and latitude, so there are no seams at tile borders or the antimeridian and no
+//! pinching at the poles. The model is a sum of *fields* and *octaves*:
+//!
+//! * fields, smooth at the scale of continents (wavelengths of 300 km and more): a
+//!   domain-warped continent shape that decides land and sea, a mountain-belt mask, a
+//!   hilliness and a moisture field;
+//! * relief octaves: ridged noise for mountain ranges (300 km down to 0.6 km, weighted by the
+//!   mountain mask) and a power-law ("fractal", Hurst exponent 0.7) detail series from 150 km
+//!   down to 0.15 m, weighted by a roughness derived from the fields, so plains stay gentle and
+//!   mountains get crags.
+//!
+//! Because the relief is a plain sum of octaves with known amplitudes, a tile generator can
+//! evaluate each octave at the resolution it needs, and bound exactly how much the octaves it
+//! leaves out could add (see [`ProceduralPlanet::omitted_amplitude_m`]).
+
+use globus_geo::{DVec3, Ellipsoid};
+
+use crate::noise::{NOISE_BOUND, Octaves};
+
+/// Wavelength of the largest detail octave, metres.
+const DETAIL_BASE_M: f64 = 150_000.0;
+/// Amplitude of the largest detail octave at roughness 1, metres.
+const DETAIL_AMPLITUDE_M: f64 = 250.0;
+/// Hurst exponent of the detail series: amplitude scales as wavelength^H.
+const DETAIL_HURST: f64 = 0.7;
+/// Number of detail octaves: 150 km / 2^20 = 0.14 m is the finest.
+const DETAIL_OCTAVES: usize = 21;
+/// Wavelength of the largest ridge octave, metres.
+const RIDGE_BASE_M: f64 = 300_000.0;
+/// Amplitude of the largest ridge octave, metres.
+const RIDGE_AMPLITUDE_M: f64 = 5_200.0;
+/// Amplitude ratio between successive ridge octaves.
+const RIDGE_GAIN: f64 = 0.65;
+/// Number of ridge octaves (down to 0.6 km).
+const RIDGE_OCTAVES: usize = 10;
+/// The ridge shape `(1 - |n|)^2 - RIDGE_BIAS` lies in `[-RIDGE_BIAS, 1 - RIDGE_BIAS]`.
+const RIDGE_BIAS: f64 = 0.55;
+
+/// The smooth, continent-scale fields at a point.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Fields {
+    /// Height of the land/sea shape before relief, metres (negative: sea floor).
+    pub base_m: f64,
+    /// Mountain-belt weight of the ridge octaves, 0..1.
+    pub mountains: f64,
+    /// Weight of the detail octaves, about 0.1..1.3.
+    pub roughness: f64,
+    /// Wet (1) to dry (-1).
+    pub moisture: f64,
+}
+
+/// One octave of relief, and how it is weighted by the fields.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Relief {
+    /// Ridge octave `k`, weighted by [`Fields::mountains`].
+    Ridge(usize),
+    /// Detail octave `k`, weighted by [`Fields::roughness`].
+    Detail(usize),
+}
+
+/// A seeded, deterministic Earth-sized planet.
+#[derive(Clone, Debug)]
+pub struct ProceduralPlanet {
+    ellipsoid: Ellipsoid,
+    seed: u64,
+    warp: [Octaves; 3],
+    continents: Octaves,
+    belts: Octaves,
+    belt_strength: Octaves,
+    hilliness: Octaves,
+    moisture: Octaves,
+    ridges: Octaves,
+    detail: Octaves,
+    colour: Octaves,
+}
+
+impl ProceduralPlanet {
+    /// The planet for `seed` on the WGS84 ellipsoid.
+    pub fn new(seed: u64) -> Self {
+        Self::with_ellipsoid(seed, Ellipsoid::WGS84)
+    }
+
+    /// The planet for `seed` on any body (continent sizes are in metres, so small bodies get
+    /// fewer, relatively larger continents).
+    pub fn with_ellipsoid(seed: u64, ellipsoid: Ellipsoid) -> Self {
+        let s = |k: u64| {
+            seed.wrapping_mul(0x2545_f491_4f6c_dd1d)
+                .wrapping_add(k * 0x9e37)
+        };
+        Self {
+            ellipsoid,
+            seed,
+            warp: [
+                Octaves::new(s(1), 4_000_000.0, 3),
+                Octaves::new(s(2), 4_000_000.0, 3),
+                Octaves::new(s(3), 4_000_000.0, 3),
+            ],
+            continents: Octaves::new(s(4), 9_000_000.0, 6),
+            belts: Octaves::new(s(5), 3_500_000.0, 2),
+            belt_strength: Octaves::new(s(6), 5_000_000.0, 1),
+            hilliness: Octaves::new(s(7), 1_500_000.0, 2),
+            moisture: Octaves::new(s(8), 4_000_000.0, 2),
+            ridges: Octaves::new(s(9), RIDGE_BASE_M, RIDGE_OCTAVES),
+            detail: Octaves::new(s(10), DETAIL_BASE_M, DETAIL_OCTAVES),
+            colour: Octaves::new(s(11), 8_000.0, 2),
+        }
+    }
+
+    /// The body the planet is built on.
+    pub fn ellipsoid(&self) -> &Ellipsoid {
+        &self.ellipsoid
+    }
+
+    /// The seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Lowest height of the rendered surface (the sea surface), metres.
+    pub fn min_surface_height_m(&self) -> f64 {
+        0.0
+    }
+
+    /// An upper bound of the surface height anywhere, metres.
+    pub fn max_surface_height_m(&self) -> f64 {
+        let ridges: f64 = (0..RIDGE_OCTAVES)
+            .map(|k| self.amplitude_m(Relief::Ridge(k)))
+            .sum();
+        let detail: f64 = (0..DETAIL_OCTAVES)
+            .map(|k| self.amplitude_m(Relief::Detail(k)))
+            .sum();
+        BASE_LAND_M + ridges * (1.0 - RIDGE_BIAS) + detail * MAX_ROUGHNESS * NOISE_BOUND
+    }
+
+    /// The continent-scale fields at a surface point.
+    pub fn fields(&self, p: DVec3) -> Fields {
+        let fbm = |o: &Octaves, gain: f64, q: DVec3| {
+            let mut w = 1.0;
+            let mut sum = 0.0;
+            for k in 0..o.len() {
+                sum += w * o.octave(k, q);
+                w *= gain;
+            }
+            sum
+        };
+        let warp = DVec3::new(
+            fbm(&self.warp[0], 0.5, p),
+            fbm(&self.warp[1], 0.5, p),
+            fbm(&self.warp[2], 0.5, p),
+        ) * 700_000.0;
+        let land = fbm(&self.continents, 0.55, p + warp) - 0.18;
+        let base_m = if land >= 0.0 {
+            BASE_LAND_M * (land / 0.3).tanh().powf(1.3)
+        } else {
+            -4_500.0 * (-land / 0.12).tanh()
+        };
+        let inland = smoothstep(0.0, 0.12, land);
+        let belt = 1.0 - smoothstep(0.0, 0.3, fbm(&self.belts, 0.5, p + warp * 0.5).abs());
+        let strength = smoothstep(-0.45, 0.25, self.belt_strength.octave(0, p));
+        let mountains = belt * strength * inland;
+        let hills = smoothstep(-0.3, 0.5, fbm(&self.hilliness, 0.5, p));
+        let roughness = (0.12 + 0.45 * hills + 0.75 * mountains).min(MAX_ROUGHNESS);
+        let moisture = fbm(&self.moisture, 0.5, p).clamp(-1.0, 1.0);
+        Fields {
+            base_m,
+            mountains,
+            roughness,
+            moisture,
+        }
+    }
+
+    /// All relief octaves, coarsest first.
+    pub fn relief_octaves(&self) -> impl Iterator<Item = Relief> + use<> {
+        (0..RIDGE_OCTAVES)
+            .map(Relief::Ridge)
+            .chain((0..DETAIL_OCTAVES).map(Relief::Detail))
+    }
+
+    /// Wavelength of a relief octave, metres.
+    pub fn wavelength_m(&self, r: Relief) -> f64 {
+        match r {
+            Relief::Ridge(k) => self.ridges.wavelength(k),
+            Relief::Detail(k) => self.detail.wavelength(k),
+        }
+    }
+
+    /// Amplitude of a relief octave at weight 1, metres.
+    pub fn amplitude_m(&self, r: Relief) -> f64 {
+        match r {
+            Relief::Ridge(k) => RIDGE_AMPLITUDE_M * RIDGE_GAIN.powi(k as i32),
+            Relief::Detail(k) => {
+                DETAIL_AMPLITUDE_M * (self.detail.wavelength(k) / DETAIL_BASE_M).powf(DETAIL_HURST)
+            }
+        }
+    }
+
+    /// The unweighted shape of a relief octave at `p` (multiply by the amplitude and the
+    /// field weight, see [`ProceduralPlanet::relief_weight`]).
+    #[inline]
+    pub fn relief_shape(&self, r: Relief, p: DVec3) -> f64 {
+        match r {
+            Relief::Ridge(k) => {
+                let n = self.ridges.octave(k, p);
+                (1.0 - n.abs()).powi(2) - RIDGE_BIAS
+            }
+            Relief::Detail(k) => self.detail.octave(k, p),
+        }
+    }
+
+    /// The field weight of a relief octave.
+    #[inline]
+    pub fn relief_weight(r: Relief, f: &Fields) -> f64 {
+        match r {
+            Relief::Ridge(_) => f.mountains,
+            Relief::Detail(_) => f.roughness,
+        }
+    }
+
+    /// Largest possible magnitude of everything finer than `finest_wavelength_m`, for a
+    /// roughness and mountain weight at most `max_weight`, metres: the error bound of
+    /// leaving those octaves out.
+    pub fn omitted_amplitude_m(&self, finest_wavelength_m: f64, max_weight: f64) -> f64 {
+        self.relief_octaves()
+            .filter(|r| self.wavelength_m(*r) < finest_wavelength_m)
+            .map(|r| {
+                let shape_bound = match r {
+                    Relief::Ridge(_) => 1.0 - RIDGE_BIAS,
+                    Relief::Detail(_) => NOISE_BOUND,
+                };
+                self.amplitude_m(r) * shape_bound * max_weight
+            })
+            .sum()
+    }
+
+    /// The raw height (negative under the sea) at a surface point with every octave down to
+    /// `finest_wavelength_m`, evaluated directly. Tile generation computes the same sum
+    /// faster; this is the reference it is tested against.
+    pub fn height_m(&self, p: DVec3, finest_wavelength_m: f64) -> f64 {
+        let f = self.fields(p);
+        let mut h = f.base_m;
+        for r in self.relief_octaves() {
+            if self.wavelength_m(r) >= finest_wavelength_m {
+                h += self.amplitude_m(r) * Self::relief_weight(r, &f) * self.relief_shape(r, p);
+            }
+        }
+        h
+    }
+
+    /// Vegetation patches (forest versus open land) at `p`, in about [-1, 1]: a field with
+    /// an 8 km wavelength.
+    #[inline]
+    pub fn patches(&self, p: DVec3) -> f64 {
+        self.colour.octave(0, p) + 0.5 * self.colour.octave(1, p)
+    }
+
+    /// The geodetic up vector at a surface point.
+    pub fn up(&self, p: DVec3) -> DVec3 {
+        self.ellipsoid.geodetic_normal(p).unwrap_or(DVec3::Z)
+    }
+}
+
+/// Height of the continental interior plateaus, metres.
+const BASE_LAND_M: f64 = 1_000.0;
+/// Roughness never exceeds this.
+const MAX_ROUGHNESS: f64 = 1.3;
+
+/// Hermite smoothstep of `x` between `e0` and `e1`.
+pub(crate) fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
+    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use globus_geo::Cartographic;
+
+    fn surface(p: &ProceduralPlanet, lon: f64, lat: f64) -> DVec3 {
+        p.ellipsoid()
+            .cartographic_to_ecef(Cartographic::from_degrees(lon, lat, 0.0))
+    }
+
+    #[test]
+    fn deterministic_for_a_seed_and_different_between_seeds() {
+        let a = ProceduralPlanet::new(1);
+        let b = ProceduralPlanet::new(1);
+        let c = ProceduralPlanet::new(2);
+        let p = surface(&a, 7.6, 46.0);
+        assert_eq!(a.height_m(p, 0.1), b.height_m(p, 0.1));
+        assert_ne!(a.height_m(p, 0.1), c.height_m(p, 0.1));
+    }
+
+    /// Land fraction, highest point and share of land above 2500 m for a seed.
+    fn survey(seed: u64) -> (f64, f64, f64) {
+        let planet = ProceduralPlanet::new(seed);
+        let (mut land, mut high, mut max) = (0u32, 0u32, f64::MIN);
+        let n = 3000;
+        for i in 0..n {
+            let t = f64::from(i);
+            let lon = (t * 0.618_034).fract() * 360.0 - 180.0;
+            let lat = ((t * 0.754_878).fract() * 2.0 - 1.0).asin().to_degrees();
+            let h = planet.height_m(surface(&planet, lon, lat), 1000.0);
+            max = max.max(h);
+            land += u32::from(h > 0.0);
+            high += u32::from(h > 2500.0);
+        }
+        (f64::from(land) / f64::from(n), max, f64::from(high) / f64::from(land.max(1)))
+    }
+
+    #[test]
+    fn has_oceans_and_land_and_mountains() {
+        let surveys: Vec<(f64, f64, f64)> = (1..=8).map(survey).collect();
+        let mean_land = surveys.iter().map(|s| s.0).sum::<f64>() / surveys.len() as f64;
+        // Earth: 29 % land, highest point 8.8 km, about 5 % of land above 2.5 km.
+        assert!((0.2..0.5).contains(&mean_land), "mean land fraction {mean_land}: {surveys:?}");
+        for (land, max, high) in &surveys {
+            assert!(*land > 0.02 && *land < 0.9, "{surveys:?}");
+            assert!(*max > 2500.0 && *max < 9000.0, "{surveys:?}");
+            assert!(*high < 0.3, "{surveys:?}");
+        }
+        assert!(surveys.iter().filter(|s| s.2 > 0.005).count() >= 6, "mountains on most planets: {surveys:?}");
+        let max_bound = ProceduralPlanet::new(1).max_surface_height_m();
+        assert!(surveys.iter().all(|s| s.1 < max_bound));
+    }
+
+    #[test]
+    fn same_point_across_the_antimeridian_and_at_the_pole() {
+        let planet = ProceduralPlanet::new(3);
+        let e = planet.ellipsoid();
+        let a = e.cartographic_to_ecef(Cartographic::from_degrees(180.0, 10.0, 0.0));
+        let b = e.cartographic_to_ecef(Cartographic::from_degrees(-180.0, 10.0, 0.0));
+        assert!((planet.height_m(a, 0.5) - planet.height_m(b, 0.5)).abs() < 1e-6);
+        let hs: Vec<f64> = [0.0, 90.0, -170.0]
+            .iter()
+            .map(|lon| planet.height_m(surface(&planet, *lon, 90.0), 0.5))
+            .collect();
+        assert!((hs[0] - hs[1]).abs() < 1e-6 && (hs[0] - hs[2]).abs() < 1e-6);
+    }
+
+    #[test]
+    fn detail_exists_below_a_metre() {
+        let planet = ProceduralPlanet::new(5);
+        let p = surface(&planet, 7.6, 46.0);
+        let n = planet.up(p);
+        let mut diffs = 0;
+        for i in 1..20 {
+            let q = p + planet.ellipsoid().enu_frame(0.13, 0.8).east * (f64::from(i) * 0.05);
+            let coarse = planet.height_m(q, 2.0) - planet.height_m(p, 2.0);
+            let fine = planet.height_m(q, 0.1) - planet.height_m(p, 0.1);
+            if (fine - coarse).abs() > 1e-3 {
+                diffs += 1;
+            }
+        }
+        assert!(n.length() > 0.99);
+        assert!(diffs > 10, "sub-metre octaves change the surface");
+    }
+
+    #[test]
+    fn omitted_amplitude_shrinks_with_wavelength() {
+        let planet = ProceduralPlanet::new(1);
+        let a = planet.omitted_amplitude_m(10.0, 1.0);
+        let b = planet.omitted_amplitude_m(1.0, 1.0);
+        assert!(a > b && b > 0.0);
+        assert_eq!(planet.omitted_amplitude_m(0.01, 1.0), 0.0);
+    }
+}

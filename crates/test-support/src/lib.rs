@@ -1,0 +1,31 @@
+//! Test fixtures shared by the Globus crates (never a dependency of shipped code).
+//!
+//! * [`MemoryOracle`]: a [`globus_tiling::TileOracle`] with controllable load states and a
+//!   simple error model, so selection can be tested deterministically without any data.
+//! * [`image`](mod@image): reading, comparing and inspecting rendered frames.
+//! * [`shared_data`]: the path of a file in `../shared/data`.
+
+pub mod image;
+mod oracle;
+
+pub use oracle::{LoadRule, MemoryOracle};
+
+use std::path::PathBuf;
+
+/// The path of `name` in the shared data folder (`../shared/data` beside the repository).
+pub fn shared_data(name: &str) -> PathBuf {
+    workspace_root().join("../shared/data").join(name)
+}
+
+/// The workspace root (the folder holding the top `Cargo.toml`).
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// A folder under `target/` for test outputs (images to look at), created if needed.
+pub fn output_dir(test_name: &str) -> PathBuf {
+    let dir = workspace_root().join("target/test-output").join(test_name);
+    // Failing to create it only loses the artefacts, not the test.
+    let _ = std::fs::create_dir_all(&dir);
+    dir
+}

@@ -1,0 +1,25 @@
+//! `globus-tiling`: the LOD side of Globus.
+//!
+//! * [`TileKey`]: a quadtree node (level, x, y) packed into a `u64`.
+//! * [`TilingScheme`]: geographic (EPSG:4326, two 180 x 180 degree roots) and Web Mercator
+//!   (EPSG:3857, one root clipped at +-85.0511 degrees), with XYZ, TMS and quadkey naming.
+//! * [`TileBounds`]: a tile's oriented box, bounding sphere and horizon culling point.
+//! * [`select`]: level-of-detail selection as a pure function of a [`globus_geo::View`] and a
+//!   [`TileOracle`] that knows each tile's bounds, geometric error and load state.
+//!
+//! Angles are radians inside the crate; degrees appear only in naming helpers that say so.
+
+mod bounds;
+mod key;
+mod rect;
+mod scheme;
+pub mod select;
+
+pub use bounds::TileBounds;
+pub use key::{Direction, TileKey};
+pub use rect::GeoRect;
+pub use scheme::{ParseTileNameError, TilingScheme, WEB_MERCATOR_MAX_LAT_DEG};
+pub use select::{
+    DrawTile, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle, TileRequest,
+    TileState, select, select_into,
+};

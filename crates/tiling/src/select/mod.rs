@@ -1,0 +1,258 @@
+//! Level-of-detail selection: which tiles to draw this frame and which to load.
+//!
+//! This is the hierarchical LOD (HLOD) traversal of Zeitler (2015, ch. 4) and Cesium's
+//! `QuadtreePrimitive`, written as a pure function. It walks the quadtree from the roots and,
+//! for every tile it reaches:
+//!
+//! 1. culls it if its oriented box is outside the view frustum, or its horizon culling point
+//!    is hidden behind the occluder ellipsoid (both tests are conservative);
+//! 2. computes its screen-space error
+//!    `sse = geometric_error * viewport_height / (distance * 2 tan(fov_y / 2))`;
+//! 3. draws it if `sse <= max_sse_px`, or if it has no finer data;
+//! 4. otherwise refines: when every child that is not culled is loaded, it descends into them;
+//!    when some are not, it draws this tile (the loaded ancestor) and requests the missing
+//!    children with priority `sse`. A child that failed or has no data also stops refinement
+//!    here, so the ancestor keeps covering its area.
+//!
+//! Because a tile is only descended into when all its visible children can be drawn, every
+//! drawn tile is loaded and the drawn tiles never overlap; together with the culled tiles
+//! they partition the globe, so there are no holes. Only the roots can be missing (before
+//! their first load), and they are requested first.
+//!
+//! The traversal visits each tile at most once and asks the [`TileOracle`] once per tile.
+
+mod oracle;
+
+pub use oracle::{TileInfo, TileOracle, TileState};
+
+use globus_geo::{Ellipsoid, EllipsoidalOccluder, Frustum, View};
+
+use crate::{TileBounds, TileKey};
+
+/// Knobs of the selection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SelectionOptions {
+    /// The screen-space error bound in pixels (default 2).
+    pub max_sse_px: f64,
+    /// The body that hides what is behind it: the ellipsoid at the lowest terrain height.
+    pub occluder: Ellipsoid,
+    /// Distance of the near plane in metres, for frustum culling.
+    pub near_m: f64,
+    /// No tile deeper than this is selected or requested.
+    pub max_level: u8,
+}
+
+impl Default for SelectionOptions {
+    fn default() -> Self {
+        Self {
+            max_sse_px: 2.0,
+            occluder: Ellipsoid::WGS84,
+            near_m: 0.1,
+            max_level: TileKey::MAX_LEVEL,
+        }
+    }
+}
+
+/// A tile to draw this frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrawTile {
+    /// The tile (always loaded).
+    pub key: TileKey,
+    /// Its screen-space error in pixels.
+    pub sse_px: f64,
+    /// Distance from the eye to its bounding box, metres.
+    pub distance_m: f64,
+}
+
+/// A tile the selection wants loaded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileRequest {
+    /// The tile.
+    pub key: TileKey,
+    /// Higher first: the screen-space error of the drawn ancestor that needs it, in pixels.
+    pub priority: f64,
+}
+
+/// Counters of one selection.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SelectionStats {
+    /// Tiles whose bounds were tested.
+    pub nodes_visited: u32,
+    /// Tiles outside the frustum.
+    pub culled_frustum: u32,
+    /// Tiles inside the frustum but behind the horizon.
+    pub culled_horizon: u32,
+    /// Tiles selected for drawing.
+    pub selected: u32,
+    /// The deepest level among drawn tiles.
+    pub max_level: u8,
+    /// The largest screen-space error among drawn tiles, pixels.
+    pub max_sse_px: f64,
+    /// Drawn tiles whose error is above the bound because their children are still loading.
+    pub waiting_for_children: u32,
+}
+
+/// The result of one selection; reuse it across frames with [`select_into`] to avoid
+/// allocating.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Tiles to draw, in traversal order (front-to-back within each parent).
+    pub draw: Vec<DrawTile>,
+    /// Tiles to load, highest priority first. Never contains a tile and its descendant.
+    pub requests: Vec<TileRequest>,
+    /// Counters.
+    pub stats: SelectionStats,
+}
+
+/// Priority given to missing roots: nothing can be drawn without them.
+const ROOT_PRIORITY: f64 = 1e30;
+
+/// Selects the tiles to draw for `view`; see the module documentation.
+pub fn select(view: &View, oracle: &impl TileOracle, options: &SelectionOptions) -> Selection {
+    let mut out = Selection::default();
+    select_into(view, oracle, options, &mut out);
+    out
+}
+
+/// [`select`] into a reused [`Selection`].
+pub fn select_into(
+    view: &View,
+    oracle: &impl TileOracle,
+    options: &SelectionOptions,
+    out: &mut Selection,
+) {
+    out.draw.clear();
+    out.requests.clear();
+    out.stats = SelectionStats::default();
+    let mut walk = Walk {
+        oracle,
+        options,
+        eye: view.position,
+        frustum: Frustum::from_view(view, options.near_m),
+        occluder: EllipsoidalOccluder::new(&options.occluder, view.position),
+        sse_factor: view.sse_factor(),
+        out,
+    };
+    for &root in oracle.scheme().roots() {
+        let info = oracle.tile(root);
+        if !walk.is_visible(&info.bounds) {
+            continue;
+        }
+        match info.state {
+            TileState::Loaded => walk.visit(root, &info),
+            TileState::Unloaded => walk.out.requests.push(TileRequest {
+                key: root,
+                priority: ROOT_PRIORITY,
+            }),
+            TileState::NoData | TileState::Failed => {}
+        }
+    }
+    // Highest priority first; ties broken by level (ancestors first) and key for determinism.
+    out.requests.sort_by(|a, b| {
+        b.priority
+            .total_cmp(&a.priority)
+            .then(a.key.level().cmp(&b.key.level()))
+            .then(a.key.cmp(&b.key))
+    });
+}
+
+struct Walk<'a, O> {
+    oracle: &'a O,
+    options: &'a SelectionOptions,
+    eye: globus_geo::DVec3,
+    frustum: Frustum,
+    occluder: EllipsoidalOccluder,
+    sse_factor: f64,
+    out: &'a mut Selection,
+}
+
+impl<O: TileOracle> Walk<'_, O> {
+    /// Counts the visit and tests the frustum, then the horizon.
+    fn is_visible(&mut self, bounds: &TileBounds) -> bool {
+        let stats = &mut self.out.stats;
+        stats.nodes_visited += 1;
+        if self.frustum.intersect_box(&bounds.obb) == globus_geo::Intersection::Outside {
+            stats.culled_frustum += 1;
+            return false;
+        }
+        if let Some(hp) = bounds.horizon_point
+            && !self.occluder.is_scaled_point_visible(hp)
+        {
+            stats.culled_horizon += 1;
+            return false;
+        }
+        true
+    }
+
+    /// A visible, loaded tile: draw it or refine it.
+    fn visit(&mut self, key: TileKey, info: &TileInfo) {
+        let distance_m = info.bounds.obb.distance_to(self.eye);
+        let sse_px = info.geometric_error_m * self.sse_factor / distance_m.max(1e-6);
+        let can_refine = info.has_children && key.level() < self.options.max_level;
+        if sse_px <= self.options.max_sse_px || !can_refine {
+            self.draw(key, sse_px, distance_m);
+            return;
+        }
+        let Some(children) = key.children() else {
+            self.draw(key, sse_px, distance_m);
+            return;
+        };
+        let mut visible: [Option<TileInfo>; 4] = [None; 4];
+        let mut all_loaded = true;
+        let mut blocked = false;
+        for (slot, &child) in visible.iter_mut().zip(children.iter()) {
+            let child_info = self.oracle.tile(child);
+            if !self.is_visible(&child_info.bounds) {
+                continue;
+            }
+            match child_info.state {
+                TileState::Loaded => {}
+                TileState::Unloaded => all_loaded = false,
+                TileState::NoData | TileState::Failed => blocked = true,
+            }
+            *slot = Some(child_info);
+        }
+        if blocked {
+            self.draw(key, sse_px, distance_m);
+            return;
+        }
+        if !all_loaded {
+            self.out.stats.waiting_for_children += 1;
+            self.draw(key, sse_px, distance_m);
+            for (child, child_info) in children.iter().zip(visible.iter()) {
+                if matches!(child_info, Some(ci) if ci.state == TileState::Unloaded) {
+                    self.out.requests.push(TileRequest {
+                        key: *child,
+                        priority: sse_px,
+                    });
+                }
+            }
+            return;
+        }
+        // Nearest child first: front-to-back order helps early depth rejection.
+        let mut order = [0usize, 1, 2, 3];
+        let dist = |i: usize| {
+            visible[i].as_ref().map_or(f64::INFINITY, |ci| {
+                ci.bounds.sphere.centre.distance_squared(self.eye)
+            })
+        };
+        order.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
+        for i in order {
+            if let Some(ci) = visible[i].as_ref() {
+                self.visit(children[i], ci);
+            }
+        }
+    }
+
+    fn draw(&mut self, key: TileKey, sse_px: f64, distance_m: f64) {
+        let stats = &mut self.out.stats;
+        stats.selected += 1;
+        stats.max_level = stats.max_level.max(key.level());
+        stats.max_sse_px = stats.max_sse_px.max(sse_px);
+        self.out.draw.push(DrawTile {
+            key,
+            sse_px,
+            distance_m,
+        });
+    }
+}

@@ -1,0 +1,40 @@
+//! What selection asks about each tile.
+
+use crate::{TileBounds, TileKey, TilingScheme};
+
+/// The load state of a tile, as the data side reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TileState {
+    /// Not loaded (never asked for, queued, or in flight).
+    Unloaded,
+    /// Loaded and ready to draw.
+    Loaded,
+    /// The source has no data here (404, empty tile, past its coverage): do not refine.
+    NoData,
+    /// Loading failed; the ancestor keeps covering this area.
+    Failed,
+}
+
+/// What the oracle knows about one tile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileInfo {
+    /// Bounds: exact for loaded tiles, conservative estimates for the others.
+    pub bounds: TileBounds,
+    /// How far (metres) this tile's surface may be from the full-resolution surface it stands
+    /// for; an estimate for unloaded tiles.
+    pub geometric_error_m: f64,
+    /// Load state.
+    pub state: TileState,
+    /// Whether finer tiles exist below this one.
+    pub has_children: bool,
+}
+
+/// Answers selection's questions about tiles. Implementations must be cheap: selection asks
+/// once per visited tile per frame. It must answer for any valid key, loaded or not (bounds
+/// of unloaded tiles can come from the parent's data or the rectangle and a height range).
+pub trait TileOracle {
+    /// The tiling scheme of the keys.
+    fn scheme(&self) -> TilingScheme;
+    /// What is known about `key`.
+    fn tile(&self, key: TileKey) -> TileInfo;
+}

@@ -1,0 +1,242 @@
+//! Selection invariants over random cameras (property tests with an in-memory oracle).
+
+use std::collections::HashSet;
+
+use globus_geo::{Cartographic, Ellipsoid, View};
+use globus_test_support::{LoadRule, MemoryOracle};
+use globus_tiling::{SelectionOptions, TileKey, TileOracle, TilingScheme, select};
+use proptest::prelude::*;
+
+#[derive(Debug, Clone)]
+struct Camera {
+    lon: f64,
+    lat: f64,
+    alt: f64,
+    heading: f64,
+    pitch: f64,
+    width: u32,
+    height: u32,
+}
+
+fn camera() -> impl Strategy<Value = Camera> {
+    (
+        -180.0f64..180.0,
+        -90.0f64..90.0,
+        0.0f64..7.5,
+        -180.0f64..180.0,
+        -90.0f64..30.0,
+        (64u32..400, 64u32..300),
+    )
+        .prop_map(
+            |(lon, lat, log_alt, heading, pitch, (width, height))| Camera {
+                lon,
+                lat,
+                alt: 10f64.powf(log_alt),
+                heading,
+                pitch,
+                width,
+                height,
+            },
+        )
+}
+
+fn view_of(c: &Camera) -> View {
+    View::from_geodetic(
+        &Ellipsoid::WGS84,
+        Cartographic::from_degrees(c.lon, c.lat, c.alt),
+        c.heading.to_radians(),
+        c.pitch.to_radians(),
+        60f64.to_radians(),
+        c.width,
+        c.height,
+    )
+}
+
+fn oracle(scheme: TilingScheme, load: LoadRule) -> MemoryOracle {
+    let mut o = MemoryOracle::new(scheme);
+    o.load = load;
+    o.error_variation = 0.5;
+    o.leaf_level = 20;
+    o
+}
+
+/// Surface points seen through a grid of pixels: the first hit of each ray with the ellipsoid.
+fn visible_surface_points(view: &View) -> Vec<(f64, f64)> {
+    let e = Ellipsoid::WGS84;
+    let mut pts = Vec::new();
+    for j in 0..12 {
+        for i in 0..16 {
+            let x = (f64::from(i) + 0.5) / 16.0 * f64::from(view.width_px);
+            let y = (f64::from(j) + 0.5) / 12.0 * f64::from(view.height_px);
+            let dir = view.ray_direction(x, y);
+            if let Some(hit) = e.ray_hit(view.position, dir)
+                && let Some(c) = e.ecef_to_cartographic(hit)
+            {
+                pts.push((c.lon_rad, c.lat_rad));
+            }
+        }
+    }
+    pts
+}
+
+fn check_invariants(
+    scheme: TilingScheme,
+    cam: &Camera,
+    load: LoadRule,
+) -> Result<(), TestCaseError> {
+    let view = view_of(cam);
+    let oracle = oracle(scheme, load);
+    let options = SelectionOptions {
+        max_level: 20,
+        ..SelectionOptions::default()
+    };
+    let sel = select(&view, &oracle, &options);
+    let drawn: HashSet<TileKey> = sel.draw.iter().map(|d| d.key).collect();
+    prop_assert_eq!(drawn.len(), sel.draw.len(), "a tile drawn twice");
+
+    // No overlaps: no drawn tile has a drawn ancestor.
+    for d in &sel.draw {
+        let mut k = d.key;
+        while let Some(p) = k.parent() {
+            prop_assert!(
+                !drawn.contains(&p),
+                "{:?} and its ancestor {:?} both drawn",
+                d.key,
+                p
+            );
+            k = p;
+        }
+        // Only loaded data is drawn: ancestors stand in for loading children.
+        prop_assert!(oracle.is_loaded(d.key), "{:?} drawn but not loaded", d.key);
+    }
+
+    // Exact coverage of the visible surface.
+    let roots_loaded = scheme.roots().iter().all(|r| oracle.is_loaded(*r));
+    if roots_loaded {
+        for (lon, lat) in visible_surface_points(&view) {
+            let Some(_) = scheme.tile_at(lon, lat, 0) else {
+                continue;
+            };
+            let covering = sel
+                .draw
+                .iter()
+                .filter(|d| scheme.tile_at(lon, lat, d.key.level()) == Some(d.key))
+                .count();
+            prop_assert_eq!(
+                covering,
+                1,
+                "visible point ({}, {}) covered {} times",
+                lon.to_degrees(),
+                lat.to_degrees(),
+                covering
+            );
+        }
+    }
+
+    // The error bound holds wherever the data allows; elsewhere children are on their way.
+    let requested: HashSet<TileKey> = sel.requests.iter().map(|r| r.key).collect();
+    for d in &sel.draw {
+        if d.sse_px > options.max_sse_px
+            && d.key.level() < options.max_level
+            && oracle.tile(d.key).has_children
+        {
+            let children = d.key.children().expect("below max level");
+            prop_assert!(
+                children.iter().any(|c| requested.contains(c)),
+                "{:?} has sse {} but no child requested",
+                d.key,
+                d.sse_px
+            );
+        }
+    }
+
+    // Requests: parents are drawn, priorities descend, no tile with its descendant.
+    for w in sel.requests.windows(2) {
+        prop_assert!(w[0].priority >= w[1].priority);
+    }
+    for r in &sel.requests {
+        prop_assert!(!oracle.is_loaded(r.key));
+        if let Some(p) = r.key.parent() {
+            prop_assert!(
+                drawn.contains(&p),
+                "{:?} requested but parent not drawn",
+                r.key
+            );
+        }
+    }
+    let s = sel.stats;
+    prop_assert_eq!(s.selected as usize, sel.draw.len());
+    prop_assert!(s.nodes_visited >= s.selected + s.culled_frustum + s.culled_horizon);
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn geographic_all_loaded(cam in camera()) {
+        check_invariants(TilingScheme::Geographic, &cam, LoadRule::All)?;
+    }
+
+    #[test]
+    fn geographic_partially_loaded(cam in camera(), p in 0.0f64..1.0, seed in any::<u64>()) {
+        check_invariants(TilingScheme::Geographic, &cam, LoadRule::Random { probability: p, seed })?;
+    }
+
+    #[test]
+    fn geographic_loaded_to_a_level(cam in camera(), level in 0u8..8) {
+        check_invariants(TilingScheme::Geographic, &cam, LoadRule::UpToLevel(level))?;
+    }
+
+    #[test]
+    fn web_mercator_partially_loaded(cam in camera(), p in 0.3f64..1.0, seed in any::<u64>()) {
+        check_invariants(TilingScheme::WebMercator, &cam, LoadRule::Random { probability: p, seed })?;
+    }
+}
+
+#[test]
+fn unloaded_roots_are_requested_first() {
+    let o = oracle(TilingScheme::Geographic, LoadRule::UpToLevel(0));
+    let far = Camera {
+        lon: 0.0,
+        lat: 0.0,
+        alt: 2e7,
+        heading: 0.0,
+        pitch: -90.0,
+        width: 800,
+        height: 600,
+    };
+    let sel = select(&view_of(&far), &o, &SelectionOptions::default());
+    // From 20,000 km the level-0 tiles are far too coarse: their children are wanted.
+    assert!(!sel.requests.is_empty());
+    assert!(sel.requests.iter().all(|r| r.key.level() == 1));
+    assert!(sel.draw.iter().all(|d| d.key.level() == 0));
+}
+
+#[test]
+fn no_data_stops_refinement_and_keeps_the_ancestor() {
+    let mut o = oracle(TilingScheme::Geographic, LoadRule::All);
+    let near_alps = Camera {
+        lon: 7.6,
+        lat: 46.0,
+        alt: 2000.0,
+        heading: 0.0,
+        pitch: -90.0,
+        width: 640,
+        height: 480,
+    };
+    let view = view_of(&near_alps);
+    let full = select(&view, &o, &SelectionOptions::default());
+    let deep = full.stats.max_level;
+    let cut = TilingScheme::Geographic
+        .tile_at(7.6f64.to_radians(), 46f64.to_radians(), 8)
+        .expect("valid");
+    o.no_data = cut.children().expect("children").to_vec();
+    let sel = select(&view, &o, &SelectionOptions::default());
+    assert!(deep > 9);
+    assert!(
+        sel.draw.iter().any(|d| d.key == cut),
+        "the ancestor covers the no-data area"
+    );
+    assert!(sel.requests.is_empty());
+}
