@@ -4,13 +4,14 @@
 //!  view ──> select (tiling) ──> draw list ──────────────> GlobeRenderer::prepare
 //!              ▲      │ wanted tiles                          ▲
 //!              │      ├─ loaded on the CPU, not on the GPU ──> TilePool::upload (budgeted)
-//!   Resident-  │      └─ not loaded ─────────────────────────> TerrainLayer (scheduler, cache)
-//!   Oracle ────┘
+//!   TerrainLayer│     └─ not loaded ─────────────────────────> TerrainLayer (scheduler, cache)
+//!   (oracle) ───┘
 //! ```
 //!
 //! Selection sees a tile as loaded only when it is both in the CPU cache and resident in the
-//! GPU pool ([`ResidentOracle`]), so everything it draws can be drawn this very frame: no
-//! holes while data streams in, only coarser ancestors.
+//! GPU pool (the engine marks uploads and evictions with [`TerrainLayer::set_drawable`]), so
+//! everything it draws can be drawn this very frame: no holes while data streams in, only
+//! coarser ancestors.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -25,8 +26,7 @@ use globus_stream::{
 };
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
 use globus_tiling::{
-    Selection, SelectionOptions, SelectionStats, TileInfo, TileKey, TileOracle, TileRequest,
-    TileState, TilingScheme, select_into,
+    Selection, SelectionOptions, SelectionStats, TileKey, TileRequest, TilingScheme, select_into,
 };
 
 /// The default planet: seed 24 has about a third land and a mountain range at 46 N 7.6 E,
@@ -71,8 +71,11 @@ impl Default for GlobeOptions {
 pub struct FrameReport {
     /// Selection counters.
     pub selection: SelectionStats,
-    /// Microseconds spent in selection.
+    /// Microseconds spent in selection (wall clock).
     pub select_us: f64,
+    /// CPU microseconds the render thread spent in selection (excludes time the thread was
+    /// preempted by loaders or the software rasteriser on a busy machine).
+    pub select_cpu_us: f64,
     /// Tiles wanted but not drawable yet (loading or uploading).
     pub wanted: u32,
     /// Data-side counters.
@@ -95,27 +98,8 @@ pub struct Globe {
     selection: Selection,
     /// Sun and air.
     pub lighting: Option<Lighting>,
-}
-
-/// Selection's view of the world: a tile is loaded when the CPU cache has it *and* it is
-/// resident in the GPU pool.
-pub struct ResidentOracle<'a> {
-    layer: &'a TerrainLayer,
-    pool: &'a TilePool,
-}
-
-impl TileOracle for ResidentOracle<'_> {
-    fn scheme(&self) -> TilingScheme {
-        self.layer.scheme()
-    }
-
-    fn tile(&self, key: TileKey) -> TileInfo {
-        let mut info = self.layer.tile(key);
-        if info.state == TileState::Loaded && !self.pool.is_resident(key) {
-            info.state = TileState::Unloaded;
-        }
-        info
-    }
+    /// Whether the error bound may come back down after budgets forced it up.
+    pub relax_detail: bool,
 }
 
 impl Globe {
@@ -154,6 +138,7 @@ impl Globe {
             configured_sse_px: options.max_sse_px,
             selection: Selection::default(),
             lighting: None,
+            relax_detail: true,
         }
     }
 
@@ -222,16 +207,10 @@ impl Globe {
         pool.begin_frame();
 
         let started = Instant::now();
-        select_into(
-            view,
-            &ResidentOracle {
-                layer: &self.layer,
-                pool,
-            },
-            &self.options,
-            &mut self.selection,
-        );
+        let started_cpu = cpu_time::ThreadTime::try_now().ok();
+        select_into(view, &self.layer, &self.options, &mut self.selection);
         let select_us = started.elapsed().as_secs_f64() * 1e6;
+        let select_cpu_us = started_cpu.map_or(f64::NAN, |t| t.elapsed().as_secs_f64() * 1e6);
 
         // Wanted tiles already on the CPU go to the GPU; the rest to the loaders.
         let (to_upload, to_load): (Vec<TileRequest>, Vec<TileRequest>) = self
@@ -247,15 +226,29 @@ impl Globe {
                 key = k.parent();
             }
         }
+        let mut pool_full = false;
         for r in &to_upload {
             if !pool.can_upload() {
                 break;
             }
-            if let Some(data) = self.layer.get(r.key) {
-                pool.upload(queue, r.key, &data.mesh, &data.tile.colour);
+            let Some(data) = self.layer.get(r.key) else {
+                continue;
+            };
+            match pool.upload(queue, r.key, &data.mesh, &data.tile.colour) {
+                Some(upload) => {
+                    if let Some(evicted) = upload.evicted {
+                        self.layer.set_drawable(evicted, false);
+                    }
+                    self.layer.set_drawable(r.key, true);
+                }
+                None => {
+                    pool_full = true;
+                    break;
+                }
             }
         }
-        self.adapt_detail(layer_stats.over_budget);
+        let budget_bound = pool_full || layer_stats.over_budget;
+        self.adapt_detail(budget_bound);
 
         let lighting = self
             .lighting
@@ -277,6 +270,7 @@ impl Globe {
         FrameReport {
             selection: self.selection.stats,
             select_us,
+            select_cpu_us,
             wanted: self.selection.requests.len() as u32,
             layer: layer_stats,
             pool: self.renderer.pool.stats(),
@@ -286,15 +280,16 @@ impl Globe {
     }
 
     /// When the GPU pool or the CPU cache cannot hold what the view needs, raise the error
-    /// bound (less detail) instead of thrashing; relax it again when there is room.
-    fn adapt_detail(&mut self, cache_over_budget: bool) {
+    /// bound (less detail) instead of thrashing or growing; relax it again when there is
+    /// room (unless [`Globe::relax_detail`] is off, as for offline frames, which must settle).
+    fn adapt_detail(&mut self, budget_bound: bool) {
         let capacity = f64::from(self.renderer.pool.capacity());
         // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
         let needed = self.selection.draw.len() as f64 * 4.0 / 3.0;
         let sse = &mut self.options.max_sse_px;
-        if needed > capacity * 0.9 || cache_over_budget {
+        if needed > capacity * 0.9 || budget_bound {
             *sse *= 1.25;
-        } else if needed < capacity * 0.6 && *sse > self.configured_sse_px {
+        } else if self.relax_detail && needed < capacity * 0.6 && *sse > self.configured_sse_px {
             *sse = (*sse / 1.1).max(self.configured_sse_px);
         }
     }
@@ -320,8 +315,13 @@ impl Globe {
     ) -> (FrameReport, bool) {
         let deadline = Instant::now() + timeout;
         self.renderer.pool.set_uploads_per_frame(u32::MAX);
+        // Start from the configured bound and only raise it if budgets force it, so the same
+        // view always settles on the same tiles.
+        self.options.max_sse_px = self.configured_sse_px;
+        self.relax_detail = false;
         let mut stalled = 0;
         loop {
+            let sse_before = self.options.max_sse_px;
             let report = self.frame(device, queue, view);
             if report.wanted == 0 {
                 return (report, true);
@@ -329,8 +329,9 @@ impl Globe {
             if Instant::now() > deadline {
                 return (report, false);
             }
+            let progress = report.pool.uploaded_this_frame > 0 || report.sse_bound_px != sse_before;
             // Wait for tiles only if nothing could be uploaded this frame.
-            if report.pool.uploaded_this_frame == 0 {
+            if !progress {
                 if self.layer.loading() == 0 && report.layer.arrived == 0 {
                     stalled += 1;
                     if stalled > 3 {

@@ -332,6 +332,7 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
             "triangles": r.draw.triangles,
             "draw_calls": r.draw.draw_calls,
             "select_us": r.select_us,
+            "select_cpu_us": r.select_cpu_us,
             "load_ms": frame.load_ms,
             "complete": frame.complete,
             "tiles_loaded": off.globe.layer().scheduler_stats().loaded,
@@ -371,7 +372,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
         })?
     };
     let frames = (path.duration() * a.fps).floor() as usize + 1;
-    let mut samples: Vec<[f64; 6]> = Vec::with_capacity(frames);
+    let mut samples: Vec<[f64; 7]> = Vec::with_capacity(frames);
     for i in 0..frames {
         let pose = path.pose(i as f64 / a.fps);
         let camera = CameraSpec {
@@ -394,6 +395,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             f64::from(r.selection.nodes_visited),
             f64::from(r.draw.draw_calls),
             r.draw.triangles as f64,
+            r.select_cpu_us,
         ]);
     }
     let names = [
@@ -403,6 +405,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
         "nodes_visited",
         "draw_calls",
         "triangles",
+        "select_cpu_us",
     ];
     let mut summary = serde_json::Map::new();
     summary.insert("frames".into(), json!(frames));
@@ -417,13 +420,19 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             json!({"median": q(0.5), "p95": q(0.95), "max": q(1.0)}),
         );
     }
-    let nodes_per_tile: Vec<f64> = samples
+    let mut per_tile: Vec<f64> = samples
         .iter()
         .filter(|s| s[2] > 0.0)
         .map(|s| s[3] / s[2])
         .collect();
-    let max_ratio = nodes_per_tile.iter().copied().fold(0.0, f64::max);
-    summary.insert("max_nodes_visited_per_tile".into(), json!(max_ratio));
+    per_tile.sort_by(f64::total_cmp);
+    if !per_tile.is_empty() {
+        let q = |p: f64| per_tile[((per_tile.len() - 1) as f64 * p).round() as usize];
+        summary.insert(
+            "nodes_visited_per_tile".into(),
+            json!({"median": q(0.5), "p95": q(0.95), "max": q(1.0)}),
+        );
+    }
     let st = off.globe.layer().scheduler_stats();
     summary.insert("tiles_requested".into(), json!(st.requested));
     summary.insert("tiles_loaded".into(), json!(st.loaded));

@@ -50,17 +50,28 @@ impl BoundingSphere {
     }
 }
 
-/// A box with arbitrary orientation: a centre and three half-axes (the columns of
-/// `half_axes`, each pointing from the centre to the middle of a face).
+/// A box with arbitrary orientation: a centre, three orthonormal axes and the half-extent
+/// along each. Stored with unit axes so culling and distance need no square roots.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OrientedBox {
     /// Centre, ECEF metres.
     pub centre: DVec3,
-    /// Columns are the half-axis vectors, metres.
-    pub half_axes: DMat3,
+    /// Orthonormal axes (columns).
+    pub axes: DMat3,
+    /// Half-extent along each axis, metres (non-negative).
+    pub half_extents: DVec3,
 }
 
 impl OrientedBox {
+    /// A box from its centre, orthonormal `axes` (columns) and half-extents.
+    pub fn new(centre: DVec3, axes: DMat3, half_extents: DVec3) -> Self {
+        Self {
+            centre,
+            axes,
+            half_extents: half_extents.abs(),
+        }
+    }
+
     /// The smallest box with the given orthonormal `axes` (columns) containing all points.
     /// `None` for an empty set.
     pub fn from_points_with_axes(
@@ -74,25 +85,34 @@ impl OrientedBox {
             let l = to_local * p;
             (lo.min(l), hi.max(l))
         });
-        let centre_local = (min + max) * 0.5;
-        let half = (max - min) * 0.5;
         Some(Self {
-            centre: axes * centre_local,
-            half_axes: DMat3::from_cols(
-                axes.x_axis * half.x,
-                axes.y_axis * half.y,
-                axes.z_axis * half.z,
-            ),
+            centre: axes * ((min + max) * 0.5),
+            axes,
+            half_extents: (max - min) * 0.5,
         })
+    }
+
+    /// The half-axis vectors (axes scaled by the half-extents) as matrix columns.
+    pub fn half_axes(&self) -> DMat3 {
+        DMat3::from_cols(
+            self.axes.x_axis * self.half_extents.x,
+            self.axes.y_axis * self.half_extents.y,
+            self.axes.z_axis * self.half_extents.z,
+        )
+    }
+
+    /// The same box grown by `margin_m` on every side.
+    pub fn grown(&self, margin_m: f64) -> Self {
+        Self {
+            half_extents: self.half_extents + DVec3::splat(margin_m),
+            ..*self
+        }
     }
 
     /// The eight corners.
     pub fn corners(&self) -> [DVec3; 8] {
-        let (u, v, w) = (
-            self.half_axes.x_axis,
-            self.half_axes.y_axis,
-            self.half_axes.z_axis,
-        );
+        let h = self.half_axes();
+        let (u, v, w) = (h.x_axis, h.y_axis, h.z_axis);
         let c = self.centre;
         [
             c - u - v - w,
@@ -107,13 +127,15 @@ impl OrientedBox {
     }
 
     /// The radius of the box's projection onto a unit `normal` (its "effective radius").
+    #[inline]
     fn projected_radius(&self, normal: DVec3) -> f64 {
-        normal.dot(self.half_axes.x_axis).abs()
-            + normal.dot(self.half_axes.y_axis).abs()
-            + normal.dot(self.half_axes.z_axis).abs()
+        (self.axes.transpose() * normal)
+            .abs()
+            .dot(self.half_extents)
     }
 
     /// Which side of `plane` the box is on.
+    #[inline]
     pub fn intersect_plane(&self, plane: &Plane) -> Intersection {
         let r = self.projected_radius(plane.normal);
         let d = plane.signed_distance(self.centre);
@@ -127,50 +149,24 @@ impl OrientedBox {
     }
 
     /// Euclidean distance from `point` to the box, 0 inside.
+    #[inline]
     pub fn distance_to(&self, point: DVec3) -> f64 {
         self.distance_squared_to(point).sqrt()
     }
 
     /// Squared distance from `point` to the box, 0 inside.
+    #[inline]
     pub fn distance_squared_to(&self, point: DVec3) -> f64 {
-        let offset = point - self.centre;
-        let mut d2 = 0.0;
-        for axis in [
-            self.half_axes.x_axis,
-            self.half_axes.y_axis,
-            self.half_axes.z_axis,
-        ] {
-            let len = axis.length();
-            if len == 0.0 {
-                continue;
-            }
-            let along = offset.dot(axis) / len;
-            let excess = along.abs() - len;
-            if excess > 0.0 {
-                d2 += excess * excess;
-            }
-        }
-        d2
+        let local = self.axes.transpose() * (point - self.centre);
+        let excess = (local.abs() - self.half_extents).max(DVec3::ZERO);
+        excess.length_squared()
     }
 
     /// A sphere that contains the box.
     pub fn bounding_sphere(&self) -> BoundingSphere {
         BoundingSphere {
             centre: self.centre,
-            radius: (self.half_axes.x_axis + self.half_axes.y_axis + self.half_axes.z_axis)
-                .length()
-                .max(
-                    (self.half_axes.x_axis - self.half_axes.y_axis + self.half_axes.z_axis)
-                        .length(),
-                )
-                .max(
-                    (self.half_axes.x_axis + self.half_axes.y_axis - self.half_axes.z_axis)
-                        .length(),
-                )
-                .max(
-                    (-self.half_axes.x_axis + self.half_axes.y_axis + self.half_axes.z_axis)
-                        .length(),
-                ),
+            radius: self.half_extents.length(),
         }
     }
 

@@ -157,17 +157,20 @@ mod tests {
         let centre = v.position + v.forward() * 1000.0;
         let inside = OrientedBox {
             centre,
-            half_axes: DMat3::from_diagonal(DVec3::splat(1.0)),
+            axes: DMat3::IDENTITY,
+            half_extents: DVec3::splat(1.0),
         };
         assert_eq!(f.intersect_box(&inside), Intersection::Inside);
         let big = OrientedBox {
             centre,
-            half_axes: DMat3::from_diagonal(DVec3::splat(5000.0)),
+            axes: DMat3::IDENTITY,
+            half_extents: DVec3::splat(5000.0),
         };
         assert_eq!(f.intersect_box(&big), Intersection::Intersecting);
         let behind = OrientedBox {
             centre: v.position - v.forward() * 1000.0,
-            half_axes: DMat3::from_diagonal(DVec3::splat(10.0)),
+            axes: DMat3::IDENTITY,
+            half_extents: DVec3::splat(10.0),
         };
         assert_eq!(f.intersect_box(&behind), Intersection::Outside);
     }

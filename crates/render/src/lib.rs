@@ -21,5 +21,5 @@ mod target;
 pub use camera::{CameraMatrices, near_plane_m};
 pub use context::{GpuContext, RenderError};
 pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting};
-pub use pool::{PoolStats, TilePool, TilePoolOptions};
+pub use pool::{PoolStats, TilePool, TilePoolOptions, Upload};
 pub use target::{DEPTH_FORMAT, DepthTarget, OffscreenTarget, RgbaImage};

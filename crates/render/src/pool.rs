@@ -49,6 +49,15 @@ pub struct PoolStats {
     pub gpu_bytes: u64,
 }
 
+/// Where an upload went.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Upload {
+    /// The slot now holding the tile.
+    pub slot: u32,
+    /// The tile that was evicted to make room, if any.
+    pub evicted: Option<TileKey>,
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Slot {
     key: TileKey,
@@ -76,7 +85,8 @@ impl TilePool {
     /// Allocates the pools.
     pub fn new(device: &wgpu::Device, options: TilePoolOptions) -> Self {
         let limits = device.limits();
-        let by_buffer = (limits.max_storage_buffer_binding_size / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
+        let by_buffer =
+            (limits.max_storage_buffer_binding_size / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
         let slots = options
             .slots
             .min(limits.max_texture_array_layers)
@@ -168,18 +178,21 @@ impl TilePool {
         self.stats.uploaded_this_frame < self.options.uploads_per_frame
     }
 
-    /// Uploads a tile into a free or least-recently-used slot. Returns the slot, or `None` if
-    /// the frame's budget is spent or every slot is in use this frame (the pool is too small
-    /// for the view: the caller should lower detail).
+    /// Uploads a tile into a free or least-recently-used slot. Returns the slot and the tile
+    /// evicted to make room, or `None` if the frame's budget is spent or every slot is in use
+    /// this frame (the pool is too small for the view: the caller should lower detail).
     pub fn upload(
         &mut self,
         queue: &wgpu::Queue,
         key: TileKey,
         mesh: &TileMesh,
         colour: &ColourImage,
-    ) -> Option<u32> {
-        if let Some(s) = self.slot(key) {
-            return Some(s);
+    ) -> Option<Upload> {
+        if let Some(slot) = self.slot(key) {
+            return Some(Upload {
+                slot,
+                evicted: None,
+            });
         }
         if !self.can_upload()
             || colour.size != COLOUR_SIZE
@@ -187,7 +200,7 @@ impl TilePool {
         {
             return None;
         }
-        let slot = self.take_slot()?;
+        let (slot, evicted) = self.take_slot()?;
         queue.write_buffer(
             &self.vertex_buffer,
             u64::from(slot) * VERTEX_BYTES,
@@ -227,13 +240,13 @@ impl TilePool {
         self.slot_of.insert(key, slot);
         self.stats.uploaded_this_frame += 1;
         self.stats.uploaded_total += 1;
-        Some(slot)
+        Some(Upload { slot, evicted })
     }
 
-    /// A free slot, or the least recently used one not used this frame.
-    fn take_slot(&mut self) -> Option<u32> {
+    /// A free slot, or the least recently used one not used this frame (with its old tile).
+    fn take_slot(&mut self) -> Option<(u32, Option<TileKey>)> {
         if let Some(s) = self.free.pop() {
-            return Some(s);
+            return Some((s, None));
         }
         let (index, victim) = self
             .slots
@@ -245,7 +258,7 @@ impl TilePool {
         self.slot_of.remove(&victim.key);
         self.slots[index] = None;
         self.stats.evicted_total += 1;
-        Some(index as u32)
+        Some((index as u32, Some(victim.key)))
     }
 
     /// Counters.

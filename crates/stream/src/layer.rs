@@ -1,5 +1,14 @@
 //! [`TerrainLayer`]: a terrain source, its scheduler and its cache, seen by LOD selection as a
 //! [`TileOracle`].
+//!
+//! Selection asks about every tile it visits, every frame, so the answers live in one compact
+//! table ([`Node`] records, stored inline in a hash map): one lookup and a few adjacent cache
+//! lines per visit, instead of chasing pointers into the large tile data. Loaded tiles have
+//! exact records; their children get estimated records (bounds from the parent's heights) as
+//! soon as the parent arrives, so they can be culled before they are loaded.
+//!
+//! A loaded tile is reported as [`TileState::Loaded`] only once the renderer has marked it
+//! drawable ([`TerrainLayer::set_drawable`]): everything selection draws can be drawn now.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -44,16 +53,27 @@ pub struct LayerStats {
     pub cached: u32,
     /// Bytes in the cache.
     pub cached_bytes: usize,
-    /// Whether the cache is over its budget with everything in use (lower the detail).
+    /// Whether the cache is over its budget with everything in use: nothing more is loaded
+    /// until the engine lowers the detail.
     pub over_budget: bool,
+}
+
+/// What selection needs to know about one tile, stored inline.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    bounds: TileBounds,
+    error_m: f64,
+    /// Unloaded (estimate), Loaded, NoData or Failed.
+    state: TileState,
+    /// Loaded and ready to draw (set by the renderer).
+    drawable: bool,
 }
 
 /// A terrain layer: scheduler, cache and oracle over any [`TerrainSource`].
 pub struct TerrainLayer {
     scheduler: Scheduler<dyn TerrainSource>,
     cache: LruCache<Arc<TerrainData>>,
-    missing: FxHashMap<TileKey, TileState>,
-    root_bounds: FxHashMap<TileKey, TileBounds>,
+    nodes: FxHashMap<TileKey, Node>,
     ellipsoid: Ellipsoid,
     occluder: Ellipsoid,
     height_range_m: (f64, f64),
@@ -68,33 +88,28 @@ impl TerrainLayer {
         let occluder = *source.occluder();
         let height_range_m = source.height_range_m();
         let max_level = source.max_level();
-        let root_bounds = TilingScheme::Geographic
-            .roots()
-            .iter()
-            .map(|&k| {
-                let rect = TilingScheme::Geographic.rect(k);
-                (
-                    k,
-                    TileBounds::from_rect(
-                        &ellipsoid,
-                        &occluder,
-                        &rect,
-                        height_range_m.0,
-                        height_range_m.1,
-                    ),
-                )
-            })
-            .collect();
-        Self {
+        let mut layer = Self {
             scheduler: Scheduler::new(source, options.workers),
             cache: LruCache::new(options.cache_bytes),
-            missing: FxHashMap::default(),
-            root_bounds,
+            nodes: FxHashMap::default(),
             ellipsoid,
             occluder,
             height_range_m,
             max_level,
             frame: 0,
+        };
+        for &root in TilingScheme::Geographic.roots() {
+            let node = layer.estimate(root);
+            layer.nodes.insert(root, node);
+        }
+        layer
+    }
+
+    /// Marks a loaded tile as ready (or no longer ready) to draw: the renderer calls this when
+    /// it uploads or evicts the tile.
+    pub fn set_drawable(&mut self, key: TileKey, drawable: bool) {
+        if let Some(n) = self.nodes.get_mut(&key) {
+            n.drawable = drawable && n.state == TileState::Loaded;
         }
     }
 
@@ -148,7 +163,6 @@ impl TerrainLayer {
                 key = k.parent();
             }
         }
-        self.scheduler.submit(wanted);
         let mut stats = LayerStats::default();
         for (key, outcome) in self.scheduler.drain() {
             stats.arrived += 1;
@@ -158,6 +172,16 @@ impl TerrainLayer {
             .cache
             .evict_to_budget(|k, last_used| last_used == now || k.level() == 0);
         stats.evicted = evicted.len() as u32;
+        for key in evicted {
+            self.forget(key);
+        }
+        // A hard budget: while what is in use does not fit, load nothing more (the engine
+        // lowers detail until it does); otherwise replace the wanted list.
+        if self.cache.is_over_budget() {
+            self.scheduler.submit(&[]);
+        } else {
+            self.scheduler.submit(wanted);
+        }
         stats.loading = self.loading() as u32;
         stats.cached = self.cache.len() as u32;
         stats.cached_bytes = self.cache.bytes();
@@ -166,19 +190,98 @@ impl TerrainLayer {
     }
 
     fn accept(&mut self, key: TileKey, outcome: Outcome<TerrainData>) {
-        match outcome {
+        let state = match outcome {
             Outcome::Loaded(data) => {
                 let bytes = data.byte_size();
-                self.missing.remove(&key);
+                let node = Node {
+                    bounds: data.mesh.bounds,
+                    error_m: data.tile.lod_error_m(),
+                    state: TileState::Loaded,
+                    drawable: false,
+                };
+                if let Some(children) = key.children() {
+                    let child_error = node.error_m * 0.5;
+                    for (i, child) in children.into_iter().enumerate() {
+                        let estimate = Node {
+                            bounds: data.child_bounds[i],
+                            error_m: child_error,
+                            state: TileState::Unloaded,
+                            drawable: false,
+                        };
+                        self.nodes
+                            .entry(child)
+                            .and_modify(|n| {
+                                if n.state == TileState::Unloaded {
+                                    *n = estimate;
+                                }
+                            })
+                            .or_insert(estimate);
+                    }
+                }
+                self.nodes.insert(key, node);
                 self.cache.insert(key, data, bytes, self.frame);
+                return;
             }
-            Outcome::NoData => {
-                self.missing.insert(key, TileState::NoData);
-            }
+            Outcome::NoData => TileState::NoData,
             Outcome::Failed(e) => {
                 eprintln!("globus: {e}");
-                self.missing.insert(key, TileState::Failed);
+                TileState::Failed
             }
+        };
+        let mut node = self
+            .nodes
+            .get(&key)
+            .copied()
+            .unwrap_or_else(|| self.estimate(key));
+        node.state = state;
+        node.drawable = false;
+        self.nodes.insert(key, node);
+    }
+
+    /// Drops an evicted tile's record, keeping an estimate if its parent is still loaded,
+    /// and the estimates of its children (nobody can reach them any more).
+    fn forget(&mut self, key: TileKey) {
+        if let Some(children) = key.children() {
+            for child in children {
+                if self
+                    .nodes
+                    .get(&child)
+                    .is_some_and(|n| n.state == TileState::Unloaded)
+                {
+                    self.nodes.remove(&child);
+                }
+            }
+        }
+        let parent_loaded = key.parent().is_some_and(|p| self.cache.contains(p));
+        if key.level() == 0 || parent_loaded {
+            let estimate = self.estimate(key);
+            self.nodes.insert(key, estimate);
+        } else {
+            self.nodes.remove(&key);
+        }
+    }
+
+    /// An estimated record for an unloaded tile: bounds from the parent's heights if it is
+    /// loaded, else from the rectangle and the source's height range.
+    fn estimate(&self, key: TileKey) -> Node {
+        let parent = key.parent().and_then(|p| self.cache.get(p));
+        let bounds = match parent {
+            Some(p) => p.child_bounds[key.child_index()],
+            None => {
+                let rect = TilingScheme::Geographic.rect(key);
+                let (lo, hi) = self.height_range_m;
+                TileBounds::from_rect(&self.ellipsoid, &self.occluder, &rect, lo, hi)
+            }
+        };
+        let error_m = match parent {
+            Some(p) => p.tile.lod_error_m() * 0.5,
+            None => TilingScheme::Geographic.rect(key).height() * self.ellipsoid.mean_radius(),
+        };
+        Node {
+            bounds,
+            error_m,
+            state: TileState::Unloaded,
+            drawable: false,
         }
     }
 
@@ -203,30 +306,6 @@ impl TerrainLayer {
         }
         n
     }
-
-    fn estimated_bounds(&self, key: TileKey) -> TileBounds {
-        if let Some(b) = self.root_bounds.get(&key) {
-            return *b;
-        }
-        if let Some(parent) = key.parent().and_then(|p| self.cache.get(p)) {
-            return parent.child_bounds[key.child_index()];
-        }
-        let rect = TilingScheme::Geographic.rect(key);
-        TileBounds::from_rect(
-            &self.ellipsoid,
-            &self.occluder,
-            &rect,
-            self.height_range_m.0,
-            self.height_range_m.1,
-        )
-    }
-
-    fn estimated_error(&self, key: TileKey) -> f64 {
-        match key.parent().and_then(|p| self.cache.get(p)) {
-            Some(parent) => parent.tile.lod_error_m() * 0.5,
-            None => TilingScheme::Geographic.rect(key).height() * self.ellipsoid.mean_radius(),
-        }
-    }
 }
 
 impl TileOracle for TerrainLayer {
@@ -236,22 +315,19 @@ impl TileOracle for TerrainLayer {
 
     fn tile(&self, key: TileKey) -> TileInfo {
         let has_children = key.level() < self.max_level;
-        if let Some(data) = self.cache.get(key) {
-            return TileInfo {
-                bounds: data.mesh.bounds,
-                geometric_error_m: data.tile.lod_error_m(),
-                state: TileState::Loaded,
-                has_children,
-            };
-        }
+        let node = match self.nodes.get(&key) {
+            Some(n) => *n,
+            // Only reachable through a tile selection did not descend into; stay correct.
+            None => self.estimate(key),
+        };
+        let state = match node.state {
+            TileState::Loaded if !node.drawable => TileState::Unloaded,
+            s => s,
+        };
         TileInfo {
-            bounds: self.estimated_bounds(key),
-            geometric_error_m: self.estimated_error(key),
-            state: self
-                .missing
-                .get(&key)
-                .copied()
-                .unwrap_or(TileState::Unloaded),
+            bounds: node.bounds,
+            geometric_error_m: node.error_m,
+            state,
             has_children,
         }
     }

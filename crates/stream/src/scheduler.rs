@@ -71,6 +71,9 @@ impl<S: ?Sized> Shared<S> {
 
 type Message<T> = (TileKey, Outcome<T>);
 
+/// Worker priority on the crate's 0 (lowest) to 99 scale; 37 maps to nice 5 on Linux.
+const WORKER_PRIORITY: u8 = 37;
+
 /// Runs a [`TileSource`]'s loads on worker threads in priority order.
 pub struct Scheduler<S: TileSource + ?Sized> {
     shared: Arc<Shared<S>>,
@@ -199,6 +202,14 @@ impl<S: TileSource + ?Sized> Drop for Scheduler<S> {
 }
 
 fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Tile>>) {
+    // Loading is background work: somewhat below the render thread (about nice 5 on Linux),
+    // so frames stay smooth on a machine with few cores while tiles still stream in.
+    // Failing to lower it only costs smoothness.
+    if let Ok(value) = thread_priority::ThreadPriorityValue::try_from(WORKER_PRIORITY) {
+        let _ = thread_priority::set_current_thread_priority(
+            thread_priority::ThreadPriority::Crossplatform(value),
+        );
+    }
     loop {
         let key = {
             let mut q = shared.lock();

@@ -148,7 +148,7 @@ pub fn colour(s: &Surface) -> [u8; 4] {
         * (1.0 - smoothstep(38.0, 52.0, slope_deg));
     c = mix(c, p.snow, snow);
     // Texture at every scale: micro relief lightens bumps and darkens hollows.
-    let shade = 1.0 + 0.22 * s.micro;
+    let shade = 1.0 + 0.35 * s.micro;
     [
         to_srgb8(c[0] * shade),
         to_srgb8(c[1] * shade),

@@ -98,12 +98,15 @@ struct OctavePlan {
 }
 
 /// How much an octave's shape varies the ground colour. Detail octaves up to 20 km each add
-/// the same small variation, whatever the level: a coarse tile shows the average of what its
+/// a fixed variation (stronger below 50 m and in the texture octaves, as grain, stones and
+/// grass are contrasty), whatever the level: a coarse tile shows the average of what its
 /// children show (the finer octaves average out), so colours match across LOD changes while
 /// every zoom level adds texture at its own scale.
 fn texture_weight(planet: &ProceduralPlanet, r: Relief) -> f64 {
     match r {
-        Relief::Detail(_) if planet.wavelength_m(r) <= 20_000.0 => 0.09,
+        Relief::Detail(_) if planet.wavelength_m(r) <= 50.0 => 0.5,
+        Relief::Detail(_) if planet.wavelength_m(r) <= 20_000.0 => 0.25,
+        Relief::Texture(_) => 0.8,
         _ => 0.0,
     }
 }

@@ -10,7 +10,8 @@
 //! * relief octaves: ridged noise for mountain ranges (300 km down to 0.6 km, weighted by the
 //!   mountain mask) and a power-law ("fractal", Hurst exponent 0.7) detail series from 150 km
 //!   down to 0.15 m, weighted by a roughness derived from the fields, so plains stay gentle and
-//!   mountains get crags.
+//!   mountains get crags;
+//! * texture octaves below that (7 cm to 1.75 cm), which vary only the colour.
 //!
 //! Because the relief is a plain sum of octaves with known amplitudes, a tile generator can
 //! evaluate each octave at the resolution it needs, and bound exactly how much the octaves it
@@ -28,6 +29,10 @@ const DETAIL_AMPLITUDE_M: f64 = 250.0;
 const DETAIL_HURST: f64 = 0.7;
 /// Number of detail octaves: 150 km / 2^20 = 0.14 m is the finest.
 const DETAIL_OCTAVES: usize = 21;
+/// Wavelength of the largest colour-only texture octave, metres (half the finest detail).
+const TEXTURE_BASE_M: f64 = 0.07;
+/// Number of texture octaves (down to 1.75 cm).
+const TEXTURE_OCTAVES: usize = 3;
 /// Wavelength of the largest ridge octave, metres.
 const RIDGE_BASE_M: f64 = 300_000.0;
 /// Amplitude of the largest ridge octave, metres.
@@ -59,6 +64,9 @@ pub enum Relief {
     Ridge(usize),
     /// Detail octave `k`, weighted by [`Fields::roughness`].
     Detail(usize),
+    /// Texture octave `k`: below the finest relief, it varies only the ground colour (grain,
+    /// pebbles, grass) and has no height.
+    Texture(usize),
 }
 
 /// A seeded, deterministic Earth-sized planet.
@@ -75,6 +83,7 @@ pub struct ProceduralPlanet {
     ridges: Octaves,
     detail: Octaves,
     colour: Octaves,
+    texture: Octaves,
 }
 
 impl ProceduralPlanet {
@@ -106,6 +115,7 @@ impl ProceduralPlanet {
             ridges: Octaves::new(s(9), RIDGE_BASE_M, RIDGE_OCTAVES),
             detail: Octaves::new(s(10), DETAIL_BASE_M, DETAIL_OCTAVES),
             colour: Octaves::new(s(11), 8_000.0, 2),
+            texture: Octaves::new(s(12), TEXTURE_BASE_M, TEXTURE_OCTAVES),
         }
     }
 
@@ -177,6 +187,7 @@ impl ProceduralPlanet {
         (0..RIDGE_OCTAVES)
             .map(Relief::Ridge)
             .chain((0..DETAIL_OCTAVES).map(Relief::Detail))
+            .chain((0..TEXTURE_OCTAVES).map(Relief::Texture))
     }
 
     /// Wavelength of a relief octave, metres.
@@ -184,6 +195,7 @@ impl ProceduralPlanet {
         match r {
             Relief::Ridge(k) => self.ridges.wavelength(k),
             Relief::Detail(k) => self.detail.wavelength(k),
+            Relief::Texture(k) => self.texture.wavelength(k),
         }
     }
 
@@ -194,6 +206,7 @@ impl ProceduralPlanet {
             Relief::Detail(k) => {
                 DETAIL_AMPLITUDE_M * (self.detail.wavelength(k) / DETAIL_BASE_M).powf(DETAIL_HURST)
             }
+            Relief::Texture(_) => 0.0,
         }
     }
 
@@ -207,6 +220,7 @@ impl ProceduralPlanet {
                 (1.0 - n.abs()).powi(2) - RIDGE_BIAS
             }
             Relief::Detail(k) => self.detail.octave(k, p),
+            Relief::Texture(k) => self.texture.octave(k, p),
         }
     }
 
@@ -216,6 +230,7 @@ impl ProceduralPlanet {
         match r {
             Relief::Ridge(_) => f.mountains,
             Relief::Detail(_) => f.roughness,
+            Relief::Texture(_) => 0.0,
         }
     }
 
@@ -228,7 +243,7 @@ impl ProceduralPlanet {
             .map(|r| {
                 let shape_bound = match r {
                     Relief::Ridge(_) => 1.0 - RIDGE_BIAS,
-                    Relief::Detail(_) => NOISE_BOUND,
+                    Relief::Detail(_) | Relief::Texture(_) => NOISE_BOUND,
                 };
                 self.amplitude_m(r) * shape_bound * max_weight
             })
@@ -242,7 +257,7 @@ impl ProceduralPlanet {
         let f = self.fields(p);
         let mut h = f.base_m;
         for r in self.relief_octaves() {
-            if self.wavelength_m(r) >= finest_wavelength_m {
+            if self.wavelength_m(r) >= finest_wavelength_m && !matches!(r, Relief::Texture(_)) {
                 h += self.amplitude_m(r) * Self::relief_weight(r, &f) * self.relief_shape(r, p);
             }
         }
@@ -307,7 +322,11 @@ mod tests {
             land += u32::from(h > 0.0);
             high += u32::from(h > 2500.0);
         }
-        (f64::from(land) / f64::from(n), max, f64::from(high) / f64::from(land.max(1)))
+        (
+            f64::from(land) / f64::from(n),
+            max,
+            f64::from(high) / f64::from(land.max(1)),
+        )
     }
 
     #[test]
@@ -315,13 +334,19 @@ mod tests {
         let surveys: Vec<(f64, f64, f64)> = (1..=8).map(survey).collect();
         let mean_land = surveys.iter().map(|s| s.0).sum::<f64>() / surveys.len() as f64;
         // Earth: 29 % land, highest point 8.8 km, about 5 % of land above 2.5 km.
-        assert!((0.2..0.5).contains(&mean_land), "mean land fraction {mean_land}: {surveys:?}");
+        assert!(
+            (0.2..0.5).contains(&mean_land),
+            "mean land fraction {mean_land}: {surveys:?}"
+        );
         for (land, max, high) in &surveys {
             assert!(*land > 0.02 && *land < 0.9, "{surveys:?}");
             assert!(*max > 2500.0 && *max < 9000.0, "{surveys:?}");
             assert!(*high < 0.3, "{surveys:?}");
         }
-        assert!(surveys.iter().filter(|s| s.2 > 0.005).count() >= 6, "mountains on most planets: {surveys:?}");
+        assert!(
+            surveys.iter().filter(|s| s.2 > 0.005).count() >= 6,
+            "mountains on most planets: {surveys:?}"
+        );
         let max_bound = ProceduralPlanet::new(1).max_surface_height_m();
         assert!(surveys.iter().all(|s| s.1 < max_bound));
     }

@@ -5,6 +5,9 @@ use globus_tiling::{GeoRect, TileKey};
 
 use crate::grid::HEIGHT_GRID_SIDE;
 
+/// Part of a texel's ground size that counts as error for LOD selection.
+const TEXEL_ERROR_FRACTION: f64 = 2.0 / 3.0;
+
 /// One terrain tile's data, as produced by a data source on a worker thread.
 #[derive(Clone, Debug)]
 pub struct TerrainTile {
@@ -37,11 +40,14 @@ impl TerrainTile {
         self.heights_m[((j + 1) * side + i + 1) as usize]
     }
 
-    /// The error that LOD selection should use: the larger of the geometric error and the
-    /// colour texel size, so a tile is also refined when its colour would be magnified past
-    /// the pixel bound (Cesium bounds imagery the same way).
+    /// The error that LOD selection should use: the larger of the geometric error and two
+    /// thirds of the colour texel size. A tile is then also refined when its colour would be
+    /// magnified past 1.5 times the pixel bound (3 px per texel at the default 2 px), which
+    /// keeps ground texture crisp without refining flat, smooth terrain for geometry it does
+    /// not need.
     pub fn lod_error_m(&self) -> f64 {
-        self.geometric_error_m.max(self.texel_size_m)
+        self.geometric_error_m
+            .max(self.texel_size_m * TEXEL_ERROR_FRACTION)
     }
 
     /// Approximate bytes held, for cache budgets.

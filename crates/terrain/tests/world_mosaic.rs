@@ -8,7 +8,8 @@ use globus_tiling::TileKey;
 
 #[test]
 fn level_two_mosaic_shows_oceans_continents_and_ice() {
-    let planet = ProceduralPlanet::new(1);
+    // Seed 24 is the planet `globus` shows by default.
+    let planet = ProceduralPlanet::new(24);
     let level = 2u8;
     let (nx, ny) = (8u32, 4u32);
     let size = COLOUR_SIZE;

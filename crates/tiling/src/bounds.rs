@@ -72,28 +72,15 @@ impl TileBounds {
         }
         let (lon, lat) = rect.centre();
         let axes: DMat3 = ellipsoid.enu_frame(lon, lat).world_from_local();
-        let mut obb = OrientedBox::from_points_with_axes(axes, points.iter().copied()).unwrap_or(
-            OrientedBox {
-                centre: DVec3::ZERO,
-                half_axes: DMat3::ZERO,
-            },
-        );
         // The ellipsoid bulges between samples by at most r (1 - cos(step / 2)) for the
         // largest radius of curvature r (a^2 / b on an ellipsoid of revolution).
         let step = rect.width().max(rect.height()) / n as f64;
         let a = ellipsoid.maximum_radius() + max_height_m.max(0.0);
         let r = a * a / ellipsoid.minimum_radius();
         let bulge = r * (1.0 - (step * 0.5).cos());
-        for axis in [
-            &mut obb.half_axes.x_axis,
-            &mut obb.half_axes.y_axis,
-            &mut obb.half_axes.z_axis,
-        ] {
-            let len = axis.length();
-            if len > 0.0 {
-                *axis *= (len + bulge) / len;
-            }
-        }
+        let obb = OrientedBox::from_points_with_axes(axes, points.iter().copied())
+            .unwrap_or(OrientedBox::new(DVec3::ZERO, axes, DVec3::ZERO))
+            .grown(bulge);
         let centre_dir = ellipsoid.geodetic_normal_from_lon_lat(lon, lat);
         let horizon_point =
             EllipsoidalOccluder::horizon_culling_point(occluder, centre_dir, obb.corners());

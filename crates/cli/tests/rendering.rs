@@ -1,0 +1,253 @@
+//! Real rendering on whatever adapter wgpu finds (lavapipe in CI): the pictures are checked
+//! against geometry computed independently in f64, and written to
+//! `target/test-output/rendering/` to be looked at.
+
+use std::time::Duration;
+
+use globus_app::engine::{CameraSpec, GlobeOptions};
+use globus_app::offscreen::{Offscreen, RenderedFrame, save_png};
+use globus_geo::{Ellipsoid, View};
+use globus_render::RgbaImage;
+
+const TIMEOUT: Duration = Duration::from_secs(240);
+
+fn camera(
+    lon: f64,
+    lat: f64,
+    alt: f64,
+    heading: f64,
+    pitch: f64,
+    above_ground: bool,
+) -> CameraSpec {
+    CameraSpec {
+        lon_deg: lon,
+        lat_deg: lat,
+        alt_m: alt,
+        heading_deg: heading,
+        pitch_deg: pitch,
+        above_ground,
+    }
+}
+
+fn render(name: &str, cam: CameraSpec, width: u32, height: u32) -> (RenderedFrame, View) {
+    let mut off =
+        Offscreen::new(&GlobeOptions::default(), width, height).expect("a GPU or lavapipe");
+    let view = cam.view(&off.globe, 60.0, width, height);
+    let frame = off.render_complete(&view, TIMEOUT).expect("render");
+    let dir = globus_test_support::output_dir("rendering");
+    save_png(&frame.image, &dir.join(format!("{name}.png"))).expect("save");
+    assert!(
+        frame.complete,
+        "{name}: tiles still loading after {:?}",
+        TIMEOUT
+    );
+    assert_eq!(
+        frame.report.draw.missing, 0,
+        "{name}: drawn tiles not resident"
+    );
+    (frame, view)
+}
+
+fn covered(img: &RgbaImage, x: u32, y: u32) -> bool {
+    img.pixels[((y * img.width + x) * 4 + 3) as usize] == 255
+}
+
+fn coverage(img: &RgbaImage) -> f64 {
+    let n = img.pixels.chunks_exact(4).filter(|p| p[3] == 255).count();
+    n as f64 / f64::from(img.width * img.height)
+}
+
+/// Pixels whose centre ray hits `body`, and how many of those show no terrain.
+fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32) {
+    let (mut inside, mut holes) = (0, 0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(view.position, dir).is_some() {
+                inside += 1;
+                if !covered(img, x, y) {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    (inside, holes)
+}
+
+#[test]
+fn planet_disc_from_three_earth_radii_matches_the_analytic_silhouette() {
+    let (w, h) = (1920, 1080);
+    let e = Ellipsoid::WGS84;
+    let a = e.radii().x;
+    let b = e.radii().z;
+    // Camera on the equator 3 equatorial radii from the centre, looking at the centre.
+    let (frame, _) = render(
+        "orbit_3_radii",
+        camera(10.0, 0.0, 2.0 * a, 0.0, -90.0, false),
+        w,
+        h,
+    );
+    // Seen from the equatorial plane at distance D the WGS84 silhouette is an ellipse with
+    // angular half-extents atan(a / sqrt(D^2 - a^2)) and atan(b / sqrt(D^2 - a^2)).
+    let d = 3.0 * a;
+    let k = (d * d - a * a).sqrt();
+    let focal_px = f64::from(h) / 2.0 / 30f64.to_radians().tan();
+    let expected =
+        std::f64::consts::PI * (a / k * focal_px) * (b / k * focal_px) / f64::from(w * h);
+    let got = coverage(&frame.image);
+    let rel = (got - expected).abs() / expected;
+    assert!(
+        rel < 0.02,
+        "disc covers {got:.5} of the image, analytic {expected:.5} ({:.2} % off)",
+        rel * 100.0
+    );
+    let tiles = frame.report.draw.tiles;
+    assert!(tiles < 50, "{tiles} tiles drawn at 3 Earth radii");
+    assert!(
+        frame.report.selection.culled_horizon > 0,
+        "the far side is culled by the horizon"
+    );
+    assert!(frame.report.draw.draw_calls <= 10);
+}
+
+#[test]
+fn mixed_levels_leave_no_cracks() {
+    let e = Ellipsoid::WGS84;
+    // Oblique views where tiles of many levels meet: over mountains and over the north pole.
+    for (name, cam) in [
+        (
+            "mixed_levels_mountains",
+            camera(7.6, 46.0, 2_500.0, 200.0, -12.0, true),
+        ),
+        (
+            "mixed_levels_pole",
+            camera(30.0, 89.5, 20_000.0, 0.0, -25.0, true),
+        ),
+    ] {
+        let (frame, view) = render(name, cam, 640, 360);
+        let sel = &frame.report.selection;
+        let mut levels: Vec<u8> = Vec::new();
+        assert!(
+            sel.max_level >= 8,
+            "{name}: deepest level {}",
+            sel.max_level
+        );
+        levels.push(sel.max_level);
+        // Rays that hit the ellipsoid 3 km below the surface must hit terrain: no surface is
+        // lower than the sea, and meshes sag below it by far less than 3 km.
+        let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-3_000.0));
+        assert!(
+            inside > 10_000,
+            "{name}: the planet fills the lower part of the view"
+        );
+        assert_eq!(
+            holes, 0,
+            "{name}: {holes} background pixels inside the planet's silhouette"
+        );
+    }
+}
+
+#[test]
+fn one_metre_above_the_ground_shows_textured_ground() {
+    let (w, h) = (640, 360);
+    let (frame, _) = render("one_metre", camera(7.6, 46.0, 1.0, 90.0, -20.0, true), w, h);
+    let img = &frame.image;
+    // The lower half is ground everywhere.
+    let mut lower = 0;
+    for y in h / 2..h {
+        for x in 0..w {
+            lower += u32::from(covered(img, x, y));
+        }
+    }
+    assert_eq!(
+        lower,
+        w * h / 2,
+        "holes or sky in the ground below the horizon"
+    );
+    assert!(
+        frame.report.selection.max_level >= 22,
+        "max level {}",
+        frame.report.selection.max_level
+    );
+    // Not a blurred smear: the ground near the camera has texture.
+    let lum: Vec<f64> = (h * 3 / 4..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let i = ((y * w + x) * 4) as usize;
+            0.3 * f64::from(img.pixels[i])
+                + 0.6 * f64::from(img.pixels[i + 1])
+                + 0.1 * f64::from(img.pixels[i + 2])
+        })
+        .collect();
+    let mean = lum.iter().sum::<f64>() / lum.len() as f64;
+    let sd = (lum.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / lum.len() as f64).sqrt();
+    assert!(
+        sd > 2.0,
+        "the ground at 1 m is featureless (luminance sd {sd:.2})"
+    );
+}
+
+#[test]
+fn moving_one_millimetre_at_one_metre_altitude_does_not_jitter() {
+    let (w, h) = (480, 270);
+    // Near the Alps and near the north pole, where f32 coordinates would be worst.
+    for (name, lon, lat) in [("jitter_alps", 7.6, 46.0), ("jitter_pole", 179.9, 89.9)] {
+        let mut off = Offscreen::new(&GlobeOptions::default(), w, h).expect("a GPU or lavapipe");
+        let cam = camera(lon, lat, 1.0, 30.0, -25.0, true);
+        let view = cam.view(&off.globe, 60.0, w, h);
+        let a = off.render_complete(&view, TIMEOUT).expect("render");
+        let mut moved = view;
+        moved.position += view.right() * 0.001;
+        let b = off.render_complete(&moved, TIMEOUT).expect("render");
+        let again = off.render_complete(&view, TIMEOUT).expect("render");
+        let dir = globus_test_support::output_dir("rendering");
+        save_png(&a.image, &dir.join(format!("{name}_a.png"))).expect("save");
+        save_png(&b.image, &dir.join(format!("{name}_b.png"))).expect("save");
+        let to = |f: &RenderedFrame| globus_test_support::image::Rgba {
+            width: f.image.width,
+            height: f.image.height,
+            pixels: f.image.pixels.clone(),
+        };
+        assert_eq!(
+            to(&a),
+            to(&again),
+            "{name}: the same view renders differently"
+        );
+        let mean = to(&a).mean_abs_diff(&to(&b));
+        let changed = to(&a).fraction_differing(&to(&b), 24);
+        // 1 mm at 1 m shifts the nearest ground by about a tenth of a pixel: tiny differences
+        // along edges only. f32 world coordinates would shift whole tiles by centimetres.
+        assert!(
+            mean < 1.0 && changed < 0.01,
+            "{name}: mean difference {mean:.3}, {:.2} % pixels changed",
+            changed * 100.0
+        );
+        assert!(coverage(&a.image) > 0.5, "{name}: mostly ground");
+
+        // A walk of 1 m in 4 cm steps: with f32 world coordinates (0.5 m apart out here) the
+        // eye would stick, then jump by half a metre; camera-relative rendering moves the
+        // picture a little at every step, and evenly.
+        let mut diffs = Vec::new();
+        let mut previous = to(&a);
+        for step in 1..=25 {
+            let mut v = view;
+            v.position += view.right() * (0.04 * f64::from(step));
+            let f = off.render_complete(&v, TIMEOUT).expect("render");
+            let img = to(&f);
+            diffs.push(previous.mean_abs_diff(&img));
+            previous = img;
+        }
+        let mut sorted = diffs.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let worst = sorted[sorted.len() - 1];
+        assert!(
+            sorted[0] > 0.05,
+            "{name}: the camera moved 4 cm but the picture did not: {diffs:.2?}"
+        );
+        assert!(
+            worst < 4.0 * median.max(0.5),
+            "{name}: a 4 cm step changed the picture by {worst:.2} (median step {median:.2}): {diffs:.2?}"
+        );
+    }
+}

@@ -1,0 +1,76 @@
+//! LOD selection against the real terrain layer (procedural planet, loaded tiles cached), at
+//! 1920x1080 along the Alps dive: the cost `globus bench` reports per frame, without the
+//! rasteriser and tile generation competing for the CPU.
+
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use globus_geo::{Cartographic, View};
+use globus_stream::{ProceduralSource, TerrainLayer, TerrainLayerOptions, TerrainSource};
+use globus_tiling::{Selection, SelectionOptions, TileOracle, TileRequest, select_into};
+
+fn loaded_layer(view: &View, options: &SelectionOptions) -> TerrainLayer {
+    let source: Arc<dyn TerrainSource> = Arc::new(ProceduralSource::new(24, 26));
+    let mut layer = TerrainLayer::new(source, TerrainLayerOptions::default());
+    let mut sel = Selection::default();
+    loop {
+        select_into(view, &layer, options, &mut sel);
+        if sel.requests.is_empty() {
+            return layer;
+        }
+        // Tiles already loaded only wait to be marked drawable (the renderer's upload).
+        let (ready, to_load): (Vec<TileRequest>, Vec<TileRequest>) = sel
+            .requests
+            .iter()
+            .partition(|r| layer.get(r.key).is_some());
+        for r in &ready {
+            layer.set_drawable(r.key, true);
+        }
+        layer.update(&sel.draw, &to_load);
+        if ready.is_empty() {
+            layer.wait_for_tiles(Duration::from_millis(500));
+        }
+    }
+}
+
+fn selection(c: &mut Criterion) {
+    let ground = ProceduralSource::new(24, 26)
+        .height_at(7.6f64.to_radians(), 46f64.to_radians())
+        .unwrap_or(0.0);
+    for (name, alt, pitch) in [
+        ("3 radii", 2.0 * 6_378_137.0, -90.0),
+        ("150 km down", 150_000.0, -90.0),
+        ("1 km above ground, horizon", ground + 1_000.0, 0.0),
+    ] {
+        let view = View::from_geodetic(
+            &globus_geo::Ellipsoid::WGS84,
+            Cartographic::from_degrees(7.6, 46.0, alt),
+            0.0,
+            f64::to_radians(pitch),
+            60f64.to_radians(),
+            1920,
+            1080,
+        );
+        let layer = loaded_layer(&view, &SelectionOptions::default());
+        let options = SelectionOptions {
+            occluder: *layer.occluder(),
+            ..SelectionOptions::default()
+        };
+        let mut sel = Selection::default();
+        select_into(&view, &layer, &options, &mut sel);
+        let label = format!(
+            "select {name} ({} tiles, {} nodes)",
+            sel.draw.len(),
+            sel.stats.nodes_visited
+        );
+        c.bench_function(&label, |b| {
+            b.iter(|| select_into(black_box(&view), &layer, &options, &mut sel))
+        });
+        assert_eq!(layer.scheme(), globus_tiling::TilingScheme::Geographic);
+    }
+}
+
+criterion_group!(benches, selection);
+criterion_main!(benches);
