@@ -1,0 +1,298 @@
+//! The `globus` binary as a user runs it: outputs, and one clear line for every bad input.
+
+use std::process::{Command, Output};
+
+fn globus(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_globus"))
+        .args(args)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("run globus")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON on stdout")
+}
+
+/// Fails with a non-zero status and exactly one line on stderr containing `needle`.
+fn fails_with_one_line(args: &[&str], needle: &str) {
+    let out = globus(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{args:?} printed:\n{err}"
+    );
+    assert!(err.contains(needle), "{args:?}: {err}");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+}
+
+#[test]
+fn geo_ecef_and_back() {
+    let v = json(&globus(&["geo", "ecef", "-73.9857", "40.7484", "443"]));
+    let (x, y, z) = (
+        v["x"].as_f64().unwrap(),
+        v["y"].as_f64().unwrap(),
+        v["z"].as_f64().unwrap(),
+    );
+    // pyproj 3.7 / PROJ 9.5 (EPSG:4979 -> EPSG:4978) for the Empire State Building:
+    // 1335028.2532, -4651415.0403, 4141585.1828.
+    assert!(
+        (x - 1_335_028.2532).abs() < 1e-3
+            && (y + 4_651_415.0403).abs() < 1e-3
+            && (z - 4_141_585.1828).abs() < 1e-3,
+        "{v}"
+    );
+    let back = json(&globus(&[
+        "geo",
+        "cartographic",
+        &x.to_string(),
+        &y.to_string(),
+        &z.to_string(),
+    ]));
+    assert!((back["lon"].as_f64().unwrap() + 73.9857).abs() < 1e-9);
+    assert!((back["height"].as_f64().unwrap() - 443.0).abs() < 1e-6);
+}
+
+#[test]
+fn geo_tile_names_a_tile_like_bing_and_tms() {
+    // Bing's example: level 3, x 3, y 5 is quadkey 213.
+    let v = json(&globus(&[
+        "geo",
+        "tile",
+        "--scheme",
+        "webmercator",
+        "--lon",
+        "-20",
+        "--lat",
+        "-50",
+        "--level",
+        "3",
+    ]));
+    assert_eq!(
+        (v["z"].as_u64(), v["x"].as_u64(), v["y"].as_u64()),
+        (Some(3), Some(3), Some(5))
+    );
+    assert_eq!(v["quadkey"], "213");
+    assert_eq!(v["tms_y"], 2);
+    // mercantile: LngLatBbox(west=-45.0, south=-66.51326044311186, east=0.0, north=-40.97989806962013)
+    let b = &v["bounds"];
+    for (k, want) in [
+        ("west", -45.0),
+        ("south", -66.51326044311186),
+        ("east", 0.0),
+        ("north", -40.97989806962013),
+    ] {
+        assert!((b[k].as_f64().unwrap() - want).abs() < 1e-9, "{k}: {b}");
+    }
+    let g = json(&globus(&[
+        "geo",
+        "tile",
+        "--scheme",
+        "geographic",
+        "--lon",
+        "10",
+        "--lat",
+        "45",
+        "--level",
+        "0",
+    ]));
+    assert_eq!(
+        (g["x"].as_u64(), g["quadkey"].as_str()),
+        (Some(1), Some("1"))
+    );
+}
+
+#[test]
+fn bad_arguments_end_with_one_clear_line() {
+    fails_with_one_line(
+        &[
+            "geo", "tile", "--scheme", "utm", "--lon", "0", "--lat", "0", "--level", "1",
+        ],
+        "unknown tiling scheme",
+    );
+    fails_with_one_line(
+        &[
+            "geo",
+            "tile",
+            "--scheme",
+            "webmercator",
+            "--lon",
+            "0",
+            "--lat",
+            "89",
+            "--level",
+            "1",
+        ],
+        "outside",
+    );
+    fails_with_one_line(&["geo", "ecef", "200", "0", "0"], "longitude 200");
+    fails_with_one_line(
+        &["geo", "cartographic", "0", "0", "0"],
+        "centre of the Earth",
+    );
+    fails_with_one_line(&["geo", "ecef", "1", "2"], "globus");
+    let png = std::env::temp_dir().join("globus-cli-test.png");
+    let png = png.to_str().unwrap();
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,95,1000,0,0",
+            "--size",
+            "64x64",
+            "--out",
+            png,
+        ],
+        "latitude 95",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0",
+            "--size",
+            "64x64",
+            "--out",
+            png,
+        ],
+        "5 numbers",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,-120",
+            "--size",
+            "64x64",
+            "--out",
+            png,
+        ],
+        "pitch",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,abc,0,0",
+            "--size",
+            "64x64",
+            "--out",
+            png,
+        ],
+        "ALT_M",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "64by64",
+            "--out",
+            png,
+        ],
+        "--size",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "0x64",
+            "--out",
+            png,
+        ],
+        "--size",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "64x64",
+            "--sse",
+            "0",
+            "--out",
+            png,
+        ],
+        "--sse",
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "64x64",
+            "--out",
+            "/nonexistent-dir/x.png",
+        ],
+        "/nonexistent-dir/x.png",
+    );
+    fails_with_one_line(
+        &["bench", "--path", "/nonexistent/path.json"],
+        "/nonexistent/path.json",
+    );
+    fails_with_one_line(&["frobnicate"], "frobnicate");
+}
+
+#[test]
+fn view_without_a_display_fails_at_once_pointing_to_render() {
+    fails_with_one_line(&["view"], "globus render");
+}
+
+#[test]
+fn render_writes_a_png_and_stats() {
+    let dir = std::env::temp_dir().join(format!("globus-cli-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("orbit.png");
+    let stats = dir.join("orbit.json");
+    let out = globus(&[
+        "render",
+        "--camera",
+        "-120,10,20000000,0,-90",
+        "--size",
+        "160x120",
+        "--out",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).expect("a PNG").to_rgba8();
+    assert_eq!(img.dimensions(), (160, 120));
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    for key in [
+        "tiles_rendered",
+        "nodes_visited",
+        "culled_frustum",
+        "culled_horizon",
+        "max_level",
+        "max_sse_px",
+        "triangles",
+        "draw_calls",
+        "select_us",
+        "load_ms",
+        "gpu_tile_bytes",
+    ] {
+        assert!(s[key].is_number(), "stats lack {key}: {s}");
+    }
+    assert!(s["tiles_rendered"].as_u64().unwrap() > 0);
+    assert!(s["draw_calls"].as_u64().unwrap() <= 10);
+    assert_eq!(s["complete"], true);
+    std::fs::remove_dir_all(&dir).ok();
+}
