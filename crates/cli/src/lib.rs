@@ -5,6 +5,7 @@ pub mod engine;
 pub mod geo_cmd;
 pub mod offscreen;
 pub mod path;
+pub mod tile_cmd;
 pub mod viewer;
 
 pub use engine::{CameraSpec, FrameReport, Globe, GlobeOptions};

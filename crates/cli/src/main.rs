@@ -9,6 +9,7 @@ use globus_app::engine::{CameraSpec, GlobeOptions};
 use globus_app::geo_cmd;
 use globus_app::offscreen::{Offscreen, save_png};
 use globus_app::path::CameraPath;
+use globus_app::tile_cmd::{self, TileArgs};
 use globus_app::viewer::{self, ViewerOptions};
 use serde_json::json;
 
@@ -31,6 +32,11 @@ enum Command {
     Render(RenderArgs),
     /// Replay a camera path offscreen and print timing statistics as JSON.
     Bench(BenchArgs),
+    /// Build elevation or imagery tile pyramids from rasters.
+    Tile {
+        #[command(subcommand)]
+        command: TileCommand,
+    },
     /// Geodesy and tile naming conversions.
     Geo {
         #[command(subcommand)]
@@ -115,6 +121,14 @@ struct BenchArgs {
 }
 
 #[derive(Subcommand)]
+enum TileCommand {
+    /// Elevation: SRTM .hgt or greyscale images to RGB-encoded PNG tiles.
+    Dem(TileArgs),
+    /// Imagery: a JPEG/PNG world image to JPEG, PNG or WebP tiles.
+    Imagery(TileArgs),
+}
+
+#[derive(Subcommand)]
 enum GeoCommand {
     /// Longitude, latitude (degrees) and height (m) to ECEF metres.
     #[command(allow_negative_numbers = true)]
@@ -179,6 +193,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::View(a) => view(a),
         Command::Render(a) => render(a),
         Command::Bench(a) => bench(a),
+        Command::Tile { command } => {
+            let line = match command {
+                TileCommand::Dem(a) => tile_cmd::run("dem", &a)?,
+                TileCommand::Imagery(a) => tile_cmd::run("imagery", &a)?,
+            };
+            println!("{line}");
+            Ok(())
+        }
         Command::Geo { command } => {
             let out = match command {
                 GeoCommand::Ecef { lon, lat, height } => geo_cmd::ecef(lon, lat, height)?,

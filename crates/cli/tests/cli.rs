@@ -22,16 +22,7 @@ fn json(out: &Output) -> serde_json::Value {
 
 /// Fails with a non-zero status and exactly one line on stderr containing `needle`.
 fn fails_with_one_line(args: &[&str], needle: &str) {
-    let out = globus(args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{args:?} succeeded");
-    assert_eq!(
-        err.trim_end().lines().count(),
-        1,
-        "{args:?} printed:\n{err}"
-    );
-    assert!(err.contains(needle), "{args:?}: {err}");
-    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    globus_test_support::assert_one_line_failure(&format!("{args:?}"), &globus(args), &[needle]);
 }
 
 #[test]

@@ -29,3 +29,15 @@ pub fn output_dir(test_name: &str) -> PathBuf {
     let _ = std::fs::create_dir_all(&dir);
     dir
 }
+
+/// Asserts that a command the test ran (described by `what`) failed with a non-zero status
+/// and exactly one line on stderr containing every needle, and did not panic.
+pub fn assert_one_line_failure(what: &str, out: &std::process::Output, needles: &[&str]) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{what} succeeded");
+    assert_eq!(err.trim_end().lines().count(), 1, "{what} printed:\n{err}");
+    for n in needles {
+        assert!(err.contains(n), "{what}: {err} (wanted {n:?})");
+    }
+    assert!(!err.contains("panicked"), "{what}: {err}");
+}

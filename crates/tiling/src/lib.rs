@@ -18,7 +18,10 @@ pub mod select;
 pub use bounds::TileBounds;
 pub use key::{Direction, TileKey};
 pub use rect::GeoRect;
-pub use scheme::{ParseTileNameError, TilingScheme, WEB_MERCATOR_MAX_LAT_DEG};
+pub use scheme::{
+    ParseTileNameError, TilingScheme, WEB_MERCATOR_MAX_LAT_DEG, lat_to_mercator_y,
+    mercator_y_to_lat,
+};
 pub use select::{
     DrawTile, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle, TileRequest,
     TileState, select, select_into,

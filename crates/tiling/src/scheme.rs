@@ -248,13 +248,13 @@ impl fmt::Display for TilingScheme {
 }
 
 /// Web Mercator: latitude (radians) to the fraction of the square from the top, in [0, 1].
-pub(crate) fn lat_to_mercator_y(lat_rad: f64) -> f64 {
+pub fn lat_to_mercator_y(lat_rad: f64) -> f64 {
     let y = lat_rad.tan().asinh();
     (1.0 - y / PI) * 0.5
 }
 
 /// Inverse of [`lat_to_mercator_y`].
-pub(crate) fn mercator_y_to_lat(fy: f64) -> f64 {
+pub fn mercator_y_to_lat(fy: f64) -> f64 {
     (PI * (1.0 - 2.0 * fy)).sinh().atan()
 }
 

@@ -1,0 +1,132 @@
+//! `globus tile dem|imagery`: builds tile pyramids with `globus-tiler`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob, TileLayout};
+use globus_tiling::{GeoRect, TilingScheme};
+
+/// Options shared by `globus tile dem` and `globus tile imagery`.
+#[derive(Args, Clone, Debug)]
+pub struct TileArgs {
+    /// Input files: SRTM .hgt (several form a mosaic), or one JPEG/PNG image in
+    /// equirectangular projection covering --bounds.
+    #[arg(long = "in", required = true, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
+    /// Output: a directory ({z}/{x}/{y}.ext) or FILE.mbtiles.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Tiling scheme: geographic (two roots, EPSG:4326) or webmercator (EPSG:3857).
+    #[arg(long, default_value = "geographic")]
+    pub scheme: String,
+    /// Elevation encoding: terrarium, mapbox or centimetre.
+    #[arg(long, default_value = "terrarium")]
+    pub encoding: String,
+    /// Imagery format: jpeg, png or webp (lossless).
+    #[arg(long, default_value = "jpeg")]
+    pub format: String,
+    /// JPEG quality, 1..=100.
+    #[arg(long, default_value_t = 85)]
+    pub quality: u8,
+    /// Samples per tile side: 256 or 512.
+    #[arg(long, default_value_t = 256)]
+    pub tile_size: usize,
+    /// Coarsest level written.
+    #[arg(long, default_value_t = 0)]
+    pub min_level: u8,
+    /// Finest level (default: the first level as fine as the source).
+    #[arg(long)]
+    pub max_level: Option<u8>,
+    /// W,S,E,N degrees: the extent of a plain image input (default the whole world), or a
+    /// clip for georeferenced inputs.
+    #[arg(long, allow_hyphen_values = true)]
+    pub bounds: Option<String>,
+    /// Metres per grey level of a greyscale elevation image.
+    #[arg(long)]
+    pub height_scale: Option<f64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Continue an interrupted run, reusing the tiles it wrote.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing output.
+    #[arg(long)]
+    pub force: bool,
+    /// Number rows from the south in directory output (TMS) instead of from the north (XYZ).
+    #[arg(long)]
+    pub tms: bool,
+}
+
+fn parse_bounds(text: &str) -> anyhow::Result<GeoRect> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 4)
+        .with_context(|| format!("--bounds {text:?} must be four numbers W,S,E,N in degrees"))?;
+    Ok(GeoRect::from_degrees(v[0], v[1], v[2], v[3]))
+}
+
+fn parse_scheme(name: &str) -> anyhow::Result<TilingScheme> {
+    match name {
+        "geographic" | "EPSG:4326" => Ok(TilingScheme::Geographic),
+        "webmercator" | "mercator" | "EPSG:3857" => Ok(TilingScheme::WebMercator),
+        other => bail!("unknown tiling scheme {other:?} (use geographic or webmercator)"),
+    }
+}
+
+/// Builds the job for `kind` ("dem" or "imagery") from the arguments.
+pub fn job(kind: &str, a: &TileArgs) -> anyhow::Result<TileJob> {
+    let kind = match kind {
+        "dem" => JobKind::Dem {
+            encoding: ElevationEncoding::parse(&a.encoding).with_context(|| {
+                format!(
+                    "unknown elevation encoding {:?} (use terrarium, mapbox or centimetre)",
+                    a.encoding
+                )
+            })?,
+            height_scale: a.height_scale,
+        },
+        _ => {
+            if !(1..=100).contains(&a.quality) {
+                bail!("--quality must be between 1 and 100, not {}", a.quality);
+            }
+            JobKind::Imagery {
+                format: ImageFormat::parse(&a.format, a.quality).with_context(|| {
+                    format!(
+                        "unknown image format {:?} (use jpeg, png or webp)",
+                        a.format
+                    )
+                })?,
+            }
+        }
+    };
+    Ok(TileJob {
+        kind,
+        inputs: a.inputs.clone(),
+        output: a.out.clone(),
+        scheme: parse_scheme(&a.scheme)?,
+        tile_size: a.tile_size,
+        min_level: a.min_level,
+        max_level: a.max_level,
+        bounds: a.bounds.as_deref().map(parse_bounds).transpose()?,
+        threads: a.threads,
+        resume: a.resume,
+        force: a.force,
+        layout: if a.tms {
+            TileLayout::Tms
+        } else {
+            TileLayout::Xyz
+        },
+    })
+}
+
+/// Runs `globus tile dem|imagery` and returns the JSON summary line.
+pub fn run(kind: &str, a: &TileArgs) -> anyhow::Result<String> {
+    let job = job(kind, a)?;
+    let summary = globus_tiler::run(&job)?;
+    Ok(summary.to_json().to_string())
+}

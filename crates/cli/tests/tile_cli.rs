@@ -1,0 +1,195 @@
+//! `globus tile` as a user runs it: a JSON summary on success, one clear line naming the
+//! file and the problem for every bad input.
+
+#![allow(clippy::unwrap_used)] // test helpers: a failure should stop the test
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn globus(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_globus"))
+        .args(args)
+        .output()
+        .expect("run globus")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = globus_test_support::output_dir("tile_cli").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Fails with a non-zero status and exactly one line on stderr containing every needle.
+fn fails_with_one_line(args: &[&str], needles: &[&str]) {
+    globus_test_support::assert_one_line_failure(&format!("{args:?}"), &globus(args), needles);
+}
+
+#[test]
+fn dem_prints_a_json_summary() {
+    let dir = scratch("summary");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let out = dir.join("pyramid.mbtiles");
+    let o = globus(&[
+        "tile",
+        "dem",
+        "--in",
+        s(&hgt),
+        "--out",
+        s(&out),
+        "--scheme",
+        "webmercator",
+        "--encoding",
+        "mapbox",
+        "--max-level",
+        "9",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // Mercator levels 0..9 over 11..12 E, 57..58 N (closed footprint): 1+1+1+1+1+2+2+4+4+9.
+    assert_eq!(v["tiles"], 26, "{v}");
+    assert!(v["bytes"].as_u64().unwrap() > 10_000);
+    assert!(v["tiles_per_second"].as_f64().unwrap() > 0.0);
+    assert!(v["seconds"].as_f64().is_some());
+    // The output exists now: a second run must refuse, --force replaces it.
+    fails_with_one_line(
+        &["tile", "dem", "--in", s(&hgt), "--out", s(&out)],
+        &["pyramid.mbtiles", "already exists", "--force"],
+    );
+    let o = globus(&[
+        "tile",
+        "dem",
+        "--in",
+        s(&hgt),
+        "--out",
+        s(&out),
+        "--force",
+        "--max-level",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn bad_inputs_end_with_one_line_naming_the_file() {
+    let dir = scratch("bad");
+    let out = dir.join("out");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let truncated = dir.join("N10E020.hgt");
+    std::fs::write(&truncated, vec![0u8; 4000]).unwrap();
+    let corrupt = dir.join("world.jpg");
+    std::fs::write(&corrupt, b"\xff\xd8\xff\xe0 this is not really a JPEG").unwrap();
+    let badname = dir.join("elevation.hgt");
+    std::fs::copy(&hgt, &badname).unwrap();
+    let text = dir.join("notes.txt");
+    std::fs::write(&text, "hello").unwrap();
+    let missing = dir.join("N00E000.hgt");
+    let grey = globus_test_support::shared_data("earth-topology-2048x1024.png");
+    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (
+            vec!["dem", "--in", s(&truncated)],
+            vec!["N10E020.hgt", "truncated"],
+        ),
+        (
+            vec!["imagery", "--in", s(&corrupt)],
+            vec!["world.jpg", "decode"],
+        ),
+        (
+            vec!["dem", "--in", s(&badname)],
+            vec!["elevation.hgt", "N57E011"],
+        ),
+        (
+            vec!["dem", "--in", s(&text)],
+            vec!["notes.txt", "unknown input type"],
+        ),
+        (
+            vec!["dem", "--in", s(&missing)],
+            vec!["N00E000.hgt", "No such file"],
+        ),
+        (
+            vec!["dem", "--in", s(&grey)],
+            vec!["earth-topology-2048x1024.png", "--height-scale"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--bounds", "0,0,1,1"],
+            vec!["does not intersect --bounds"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--bounds", "10,60,5,50"],
+            vec!["--bounds"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--bounds", "1,2,3"],
+            vec!["--bounds", "four numbers"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--tile-size", "300"],
+            vec!["--tile-size"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--encoding", "float"],
+            vec!["float", "terrarium"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--scheme", "utm"],
+            vec!["utm", "geographic"],
+        ),
+        (
+            vec!["imagery", "--in", s(&hgt)],
+            vec!["N57E011.hgt", "tile dem"],
+        ),
+        (
+            vec!["imagery", "--in", s(&corrupt), "--format", "gif"],
+            vec!["gif"],
+        ),
+        (
+            vec![
+                "dem",
+                "--in",
+                s(&hgt),
+                "--min-level",
+                "5",
+                "--max-level",
+                "3",
+            ],
+            vec!["--max-level"],
+        ),
+    ];
+    for (args, needles) in cases {
+        let mut full = vec!["tile"];
+        full.extend(args);
+        full.extend(["--out", s(&out)]);
+        fails_with_one_line(&full, &needles);
+        assert!(!out.exists(), "{full:?} left an output behind");
+    }
+    // An output that cannot be written.
+    fails_with_one_line(
+        &[
+            "tile",
+            "dem",
+            "--in",
+            s(&hgt),
+            "--out",
+            "/proc/globus-cannot-write-here",
+            "--max-level",
+            "2",
+        ],
+        &["/proc/globus-cannot-write-here"],
+    );
+}
+
+#[test]
+fn force_will_not_delete_a_directory_that_is_not_a_pyramid() {
+    let dir = scratch("force");
+    std::fs::write(dir.join("thesis.tex"), "precious").unwrap();
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    fails_with_one_line(
+        &["tile", "dem", "--in", s(&hgt), "--out", s(&dir), "--force"],
+        &["thesis.tex", "not part of a tile pyramid"],
+    );
+    assert!(dir.join("thesis.tex").exists());
+}

@@ -1,0 +1,520 @@
+//! [`TileJob`]: everything `globus tile dem|imagery` asks for, checked, run, summarised.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use globus_tiling::{GeoRect, TileKey, TilingScheme, WEB_MERCATOR_MAX_LAT_DEG};
+
+use crate::encoding::ElevationEncoding;
+use crate::error::{Result, TilerError};
+use crate::fill::fill_voids;
+use crate::format::ImageFormat;
+use crate::input;
+use crate::layer::{ElevationLayer, ImageryLayer, Layer};
+use crate::pyramid::{Progress, Pyramid, report_progress};
+use crate::raster::{ElevationRaster, ImageRaster, intersect};
+use crate::resample::SampleGrid;
+use crate::sink::{DirSink, MbTilesSink, PyramidMetadata, TileLayout, TileSink};
+
+/// What the pyramid holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum JobKind {
+    /// Elevation, RGB-encoded in lossless PNG.
+    Dem {
+        /// The RGB encoding.
+        encoding: ElevationEncoding,
+        /// Metres per grey level, for greyscale image inputs.
+        height_scale: Option<f64>,
+    },
+    /// Imagery.
+    Imagery {
+        /// The tile format.
+        format: ImageFormat,
+    },
+}
+
+/// A tiling job.
+#[derive(Clone, Debug)]
+pub struct TileJob {
+    /// Elevation or imagery.
+    pub kind: JobKind,
+    /// Input files.
+    pub inputs: Vec<PathBuf>,
+    /// A directory, `FILE.mbtiles` or `FILE.pmtiles`.
+    pub output: PathBuf,
+    /// The tiling scheme.
+    pub scheme: TilingScheme,
+    /// 256 or 512.
+    pub tile_size: usize,
+    /// Coarsest level (default 0).
+    pub min_level: u8,
+    /// Finest level (default: the first level as fine as the source).
+    pub max_level: Option<u8>,
+    /// For plain images, the extent they cover; for georeferenced inputs, a clip.
+    pub bounds: Option<GeoRect>,
+    /// Worker threads (default: all cores).
+    pub threads: Option<usize>,
+    /// Continue an interrupted run, reusing its tiles.
+    pub resume: bool,
+    /// Replace an existing output.
+    pub force: bool,
+    /// Row order of directory output.
+    pub layout: TileLayout,
+}
+
+/// The result of a job, printed as one JSON line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Summary {
+    /// Tiles written by this run.
+    pub tiles: u64,
+    /// Tiles reused from an earlier run (`--resume`).
+    pub tiles_reused: u64,
+    /// Bytes of tile data written.
+    pub bytes: u64,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Levels written.
+    pub levels: (u8, u8),
+    /// Source samples that were voids and got filled.
+    pub voids_filled: usize,
+}
+
+impl Summary {
+    /// The JSON summary line.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "tiles": self.tiles,
+            "tiles_reused": self.tiles_reused,
+            "bytes": self.bytes,
+            "seconds": (self.seconds * 1000.0).round() / 1000.0,
+            "tiles_per_second": (self.tiles as f64 / self.seconds.max(1e-9) * 10.0).round() / 10.0,
+            "min_level": self.levels.0,
+            "max_level": self.levels.1,
+            "voids_filled": self.voids_filled,
+        })
+    }
+}
+
+enum InputKind {
+    Hgt,
+    Image,
+    GeoTiff,
+}
+
+fn input_kind(path: &Path) -> Result<InputKind> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    match ext.as_str() {
+        "hgt" => Ok(InputKind::Hgt),
+        "jpg" | "jpeg" | "png" | "webp" => Ok(InputKind::Image),
+        "tif" | "tiff" => Ok(InputKind::GeoTiff),
+        _ => Err(TilerError::bad_input(
+            path,
+            "unknown input type; expected .hgt, .tif/.tiff, .jpg, .png or .webp",
+        )),
+    }
+}
+
+fn single_image(job: &TileJob) -> Result<&Path> {
+    match job.inputs.as_slice() {
+        [one] => Ok(one),
+        _ => Err(TilerError::BadOptions(format!(
+            "a plain image input must be the only input ({} given)",
+            job.inputs.len()
+        ))),
+    }
+}
+
+fn check_bounds(b: &GeoRect) -> Result<()> {
+    let [w, s, e, n] = b.to_degrees();
+    let ok = w.is_finite()
+        && s.is_finite()
+        && e.is_finite()
+        && n.is_finite()
+        && (-180.0..180.0).contains(&w)
+        && w < e
+        && e <= 180.0
+        && (-90.0..90.0).contains(&s)
+        && s < n
+        && n <= 90.0;
+    if ok {
+        Ok(())
+    } else {
+        Err(TilerError::BadOptions(format!(
+            "--bounds {w},{s},{e},{n} is not a rectangle W,S,E,N in degrees with W < E and S < N"
+        )))
+    }
+}
+
+fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(ElevationRaster, usize)> {
+    let first = job
+        .inputs
+        .first()
+        .ok_or_else(|| TilerError::BadOptions("no --in file".into()))?;
+    let mut raster = match input_kind(first)? {
+        InputKind::Hgt => {
+            if let Some(p) = job
+                .inputs
+                .iter()
+                .find(|p| !matches!(input_kind(p), Ok(InputKind::Hgt)))
+            {
+                return Err(TilerError::bad_input(p, "cannot be mixed with .hgt inputs"));
+            }
+            input::read_hgt_mosaic(&job.inputs)?
+        }
+        InputKind::Image => {
+            let path = single_image(job)?;
+            let scale = height_scale.ok_or_else(|| {
+                TilerError::bad_input(
+                    path,
+                    "a greyscale image needs --height-scale (metres per grey level)",
+                )
+            })?;
+            input::read_grey_elevation(path, job.bounds.unwrap_or(GeoRect::WORLD), scale)?
+        }
+        InputKind::GeoTiff => {
+            return Err(TilerError::bad_input(
+                first,
+                "GeoTIFF input is not supported yet; convert it to .hgt or a plain image",
+            ));
+        }
+    };
+    let filled = fill_voids(&mut raster.data, raster.width, raster.height)
+        .ok_or_else(|| TilerError::bad_input(first, "has no valid elevation sample (all voids)"))?;
+    Ok((raster, filled))
+}
+
+fn read_imagery(job: &TileJob) -> Result<ImageRaster> {
+    let path = single_image(job)?;
+    match input_kind(path)? {
+        InputKind::Image => input::read_world_image(path, job.bounds.unwrap_or(GeoRect::WORLD)),
+        InputKind::Hgt => Err(TilerError::bad_input(
+            path,
+            "is elevation; use `globus tile dem` for it",
+        )),
+        InputKind::GeoTiff => Err(TilerError::bad_input(
+            path,
+            "GeoTIFF input is not supported yet; convert it to a plain JPEG/PNG with --bounds",
+        )),
+    }
+}
+
+/// The footprint to tile: the source's, clipped to `--bounds` for georeferenced inputs and
+/// to the scheme's latitude range.
+fn footprint(job: &TileJob, source: GeoRect, georeferenced: bool) -> Result<GeoRect> {
+    let mut fp = source;
+    if georeferenced && let Some(b) = &job.bounds {
+        fp = intersect(&fp, b, false).ok_or_else(|| {
+            let [w, s, e, n] = source.to_degrees();
+            TilerError::BadOptions(format!(
+                "the input covers {w:.4},{s:.4},{e:.4},{n:.4}, which does not intersect --bounds {}",
+                b.to_degrees().map(|d| format!("{d}")).join(",")
+            ))
+        })?;
+    }
+    if job.scheme == TilingScheme::WebMercator {
+        let lim = WEB_MERCATOR_MAX_LAT_DEG.to_radians();
+        fp.north = fp.north.min(lim);
+        fp.south = fp.south.max(-lim);
+        if fp.south >= fp.north {
+            return Err(TilerError::BadOptions(
+                "the input lies entirely beyond the Web Mercator latitude limit (85.0511)".into(),
+            ));
+        }
+    }
+    Ok(fp)
+}
+
+/// The first level whose sample spacing is at least as fine as the source's.
+fn native_level(
+    scheme: TilingScheme,
+    grid: SampleGrid,
+    size: usize,
+    source_spacing_rad: f64,
+) -> u8 {
+    let per_tile = match grid {
+        SampleGrid::Corners => (size - 1) as f64,
+        SampleGrid::Cells => size as f64,
+    };
+    (0..=24u8)
+        .find(|&z| {
+            2.0 * std::f64::consts::PI / scheme.tiles_x(z) as f64 / per_tile
+                <= source_spacing_rad * (1.0 + 1e-9)
+        })
+        .unwrap_or(24)
+}
+
+enum Sink {
+    Dir(DirSink),
+    MbTiles(MbTilesSink),
+}
+
+impl Sink {
+    fn as_dyn(&self) -> &dyn TileSink {
+        match self {
+            Sink::Dir(d) => d,
+            Sink::MbTiles(m) => m,
+        }
+    }
+
+    fn finish(self, meta: &PyramidMetadata) -> Result<()> {
+        match self {
+            Sink::Dir(d) => d.finish(meta),
+            Sink::MbTiles(m) => m.finish(meta),
+        }
+    }
+}
+
+fn open_sink(job: &TileJob, extension: &'static str) -> Result<Sink> {
+    let out = &job.output;
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let exists = out.exists();
+    if exists && !job.force && !job.resume {
+        return Err(TilerError::output(
+            out,
+            "already exists; pass --force to replace it or --resume to continue it",
+        ));
+    }
+    match ext.as_str() {
+        "mbtiles" => Ok(Sink::MbTiles(MbTilesSink::create(
+            out, job.scheme, job.resume,
+        )?)),
+        "pmtiles" => Err(TilerError::output(
+            out,
+            "PMTiles output is not supported yet",
+        )),
+        _ => {
+            if exists && job.force && !job.resume {
+                remove_tile_dir(out)?;
+            }
+            Ok(Sink::Dir(DirSink::create(
+                out, job.scheme, job.layout, extension,
+            )?))
+        }
+    }
+}
+
+/// Removes a directory for `--force`, but only one that holds nothing but a pyramid
+/// (numbered level directories and `metadata.json`): a mistyped `--out ~` must not
+/// delete a home directory.
+fn remove_tile_dir(dir: &Path) -> Result<()> {
+    if !dir.is_dir() {
+        return std::fs::remove_file(dir).map_err(|e| TilerError::output(dir, e));
+    }
+    let entries = std::fs::read_dir(dir).map_err(|e| TilerError::output(dir, e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| TilerError::output(dir, e))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let is_level = name.parse::<u8>().is_ok() && entry.path().is_dir();
+        if !(is_level || name == crate::sink::dir::METADATA_FILE) {
+            return Err(TilerError::output(
+                dir,
+                format!("--force refuses to delete it: {name} is not part of a tile pyramid"),
+            ));
+        }
+    }
+    std::fs::remove_dir_all(dir).map_err(|e| TilerError::output(dir, e))
+}
+
+fn run_layer<L: Layer>(
+    job: &TileJob,
+    layer: &L,
+    footprint: GeoRect,
+    max_level: u8,
+    meta: PyramidMetadata,
+    voids_filled: usize,
+) -> Result<Summary> {
+    let start = Instant::now();
+    let sink = open_sink(job, layer.extension())?;
+    let progress = Progress::default();
+    let closed = layer.grid() == SampleGrid::Corners;
+    let pyramid = Pyramid {
+        layer,
+        sink: sink.as_dyn(),
+        scheme: job.scheme,
+        footprint,
+        closed,
+        min_level: job.min_level,
+        max_level,
+        resume: job.resume,
+        progress: &progress,
+    };
+    progress.total.store(pyramid.count(None), Ordering::Relaxed);
+    let threads = job.threads.unwrap_or(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("globus-tile-{i}"))
+        .build()
+        .map_err(|e| TilerError::BadOptions(format!("--threads {threads}: {e}")))?;
+    let done = AtomicBool::new(false);
+    let result = std::thread::scope(|s| {
+        if std::io::stderr().is_terminal() {
+            s.spawn(|| report_progress(&progress, &done, start));
+        }
+        let r = pool.install(|| pyramid.run());
+        done.store(true, Ordering::Relaxed);
+        r
+    });
+    result?;
+    sink.finish(&meta)?;
+    let written = progress.written.load(Ordering::Relaxed);
+    Ok(Summary {
+        tiles: written,
+        tiles_reused: progress.tiles.load(Ordering::Relaxed) - written,
+        bytes: progress.bytes.load(Ordering::Relaxed),
+        seconds: start.elapsed().as_secs_f64(),
+        levels: (job.min_level, max_level),
+        voids_filled,
+    })
+}
+
+fn check_job(job: &TileJob) -> Result<()> {
+    if job.inputs.is_empty() {
+        return Err(TilerError::BadOptions("no --in file given".into()));
+    }
+    if job.tile_size != 256 && job.tile_size != 512 {
+        return Err(TilerError::BadOptions(format!(
+            "--tile-size must be 256 or 512, not {}",
+            job.tile_size
+        )));
+    }
+    if let Some(b) = &job.bounds {
+        check_bounds(b)?;
+    }
+    if job.min_level > TileKey::MAX_LEVEL - 1 {
+        return Err(TilerError::BadOptions(format!(
+            "--min-level {} is too deep",
+            job.min_level
+        )));
+    }
+    Ok(())
+}
+
+fn levels(job: &TileJob, native: u8) -> Result<u8> {
+    let max = job.max_level.unwrap_or(native.max(job.min_level));
+    if max < job.min_level || max > 24 {
+        return Err(TilerError::BadOptions(format!(
+            "--max-level {max} must be between --min-level {} and 24",
+            job.min_level
+        )));
+    }
+    Ok(max)
+}
+
+fn stem(job: &TileJob) -> String {
+    job.inputs
+        .first()
+        .and_then(|p| p.file_stem())
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "globus".into())
+}
+
+/// The levels and metadata of a job once its source is read.
+struct Plan {
+    footprint: GeoRect,
+    max_level: u8,
+    meta: PyramidMetadata,
+}
+
+fn plan(
+    job: &TileJob,
+    source_footprint: GeoRect,
+    georeferenced: bool,
+    grid: SampleGrid,
+    lon_spacing_rad: f64,
+    format: &str,
+    encoding: Option<ElevationEncoding>,
+) -> Result<Plan> {
+    let footprint = footprint(job, source_footprint, georeferenced)?;
+    let max_level = levels(
+        job,
+        native_level(job.scheme, grid, job.tile_size, lon_spacing_rad),
+    )?;
+    let meta = PyramidMetadata {
+        name: stem(job),
+        format: format.into(),
+        kind: if encoding.is_some() {
+            "elevation"
+        } else {
+            "imagery"
+        }
+        .into(),
+        encoding: encoding.map(|e| e.name().into()),
+        scheme: job.scheme,
+        tile_size: job.tile_size,
+        sample_grid: match grid {
+            SampleGrid::Corners => "corners",
+            SampleGrid::Cells => "cells",
+        }
+        .into(),
+        bounds: footprint,
+        min_level: job.min_level,
+        max_level,
+    };
+    Ok(Plan {
+        footprint,
+        max_level,
+        meta,
+    })
+}
+
+/// Runs a job.
+pub fn run(job: &TileJob) -> Result<Summary> {
+    check_job(job)?;
+    match job.kind {
+        JobKind::Dem {
+            encoding,
+            height_scale,
+        } => {
+            let georeferenced = !matches!(input_kind(&job.inputs[0])?, InputKind::Image);
+            let (source, filled) = read_elevation(job, height_scale)?;
+            let p = plan(
+                job,
+                source.footprint(),
+                georeferenced,
+                SampleGrid::Corners,
+                source.georef.lon_spacing_rad(),
+                "png",
+                Some(encoding),
+            )?;
+            let layer = ElevationLayer {
+                source,
+                footprint: p.footprint,
+                size: job.tile_size,
+                encoding,
+            };
+            run_layer(job, &layer, p.footprint, p.max_level, p.meta, filled)
+        }
+        JobKind::Imagery { format } => {
+            let source = read_imagery(job)?;
+            let p = plan(
+                job,
+                source.footprint(),
+                false,
+                SampleGrid::Cells,
+                source.georef.lon_spacing_rad(),
+                format.extension(),
+                None,
+            )?;
+            let opaque = source.data.iter().all(|p| p[3] == 255);
+            let layer = ImageryLayer {
+                source,
+                opaque,
+                footprint: p.footprint,
+                size: job.tile_size,
+                format,
+            };
+            run_layer(job, &layer, p.footprint, p.max_level, p.meta, 0)
+        }
+    }
+}

@@ -1,0 +1,273 @@
+//! Building a pyramid: a depth-first walk of the quadtree over the data's footprint. Tiles
+//! at the finest level are resampled from the source; every coarser tile is made from its
+//! four children while they are still in memory, then written, so the source is read once
+//! and memory holds only the tiles on the active paths (about four per level per thread).
+//! Siblings are built in parallel (rayon work stealing).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use globus_tiling::{GeoRect, TileKey, TilingScheme};
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::layer::Layer;
+use crate::raster::intersect;
+use crate::sink::TileSink;
+
+/// The range of tile columns and rows at a level that intersect a footprint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileRange {
+    /// The level.
+    pub level: u8,
+    /// First and last column.
+    pub x: (u32, u32),
+    /// First and last row (from the north).
+    pub y: (u32, u32),
+}
+
+impl TileRange {
+    /// The number of tiles in the range.
+    pub fn count(&self) -> u64 {
+        u64::from(self.x.1 - self.x.0 + 1) * u64::from(self.y.1 - self.y.0 + 1)
+    }
+}
+
+/// First index in `0..n` where `pred` turns false (`pred` is true then false).
+fn partition_point(n: u64, pred: impl Fn(u64) -> bool) -> u64 {
+    let (mut lo, mut hi) = (0u64, n);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if pred(mid) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// The tiles of `level` whose rectangles intersect `footprint` (with positive area, or also
+/// by touching when `closed`), exactly as [`covers`] decides per tile.
+pub fn tile_range(
+    scheme: TilingScheme,
+    level: u8,
+    footprint: &GeoRect,
+    closed: bool,
+) -> Option<TileRange> {
+    let (nx, ny) = (scheme.tiles_x(level), scheme.tiles_y(level));
+    let col = |i: u64| scheme.rect(TileKey::new(level, i as u32, 0));
+    let row = |j: u64| scheme.rect(TileKey::new(level, 0, j as u32));
+    let before = |a: f64, b: f64| if closed { a < b } else { a <= b };
+    // Each predicate is true for the tiles before the range (or not yet past it).
+    let x0 = partition_point(nx, |i| before(col(i).east, footprint.west));
+    let x_end = partition_point(nx, |i| !before(footprint.east, col(i).west));
+    let y0 = partition_point(ny, |j| before(footprint.north, row(j).south));
+    let y_end = partition_point(ny, |j| !before(row(j).north, footprint.south));
+    (x0 < x_end && y0 < y_end).then(|| TileRange {
+        level,
+        x: (x0 as u32, (x_end - 1) as u32),
+        y: (y0 as u32, (y_end - 1) as u32),
+    })
+}
+
+/// Whether a tile is part of the pyramid over `footprint`.
+pub fn covers(scheme: TilingScheme, key: TileKey, footprint: &GeoRect, closed: bool) -> bool {
+    intersect(&scheme.rect(key), footprint, closed).is_some()
+}
+
+/// Tiles done and bytes written, shared by the workers and the progress display.
+#[derive(Debug, Default)]
+pub struct Progress {
+    /// Tiles written or found already written.
+    pub tiles: AtomicU64,
+    /// Tiles written by this run.
+    pub written: AtomicU64,
+    /// Bytes written by this run.
+    pub bytes: AtomicU64,
+    /// Tiles the job will make in all.
+    pub total: AtomicU64,
+}
+
+impl Progress {
+    /// One line: tiles done of total, rate and estimated time left.
+    pub fn line(&self, elapsed: Duration) -> String {
+        let done = self.tiles.load(Ordering::Relaxed);
+        let rate = done as f64 / elapsed.as_secs_f64().max(1e-3);
+        let total = self.total.load(Ordering::Relaxed);
+        let left = total.saturating_sub(done) as f64 / rate.max(1e-9);
+        let pct = 100.0 * done as f64 / total.max(1) as f64;
+        format!(
+            "{done}/{total} tiles ({pct:.1}%)  {rate:.0} tiles/s  ETA {}",
+            if done == 0 {
+                "--".to_string()
+            } else {
+                format!("{:.0} s", left)
+            }
+        )
+    }
+}
+
+/// One pyramid build.
+pub struct Pyramid<'a, L: Layer> {
+    /// What the tiles are made of.
+    pub layer: &'a L,
+    /// Where they go.
+    pub sink: &'a dyn TileSink,
+    /// The tiling scheme.
+    pub scheme: TilingScheme,
+    /// The data's extent; tiles outside it are not made.
+    pub footprint: GeoRect,
+    /// Whether tiles merely touching the footprint are made (corner grids, whose edge
+    /// samples must exist on both sides of every edge).
+    pub closed: bool,
+    /// Coarsest level written.
+    pub min_level: u8,
+    /// Finest level, resampled from the source.
+    pub max_level: u8,
+    /// Reuse tiles the sink already holds instead of rebuilding their subtrees.
+    pub resume: bool,
+    /// Counters.
+    pub progress: &'a Progress,
+}
+
+impl<L: Layer> Pyramid<'_, L> {
+    /// The number of tiles from `min_level` to `max_level` (below `within`, if given).
+    pub fn count(&self, within: Option<TileKey>) -> u64 {
+        (self.min_level..=self.max_level)
+            .map(|level| {
+                let fp = match within {
+                    Some(k) if k.level() <= level => {
+                        match intersect(&self.scheme.rect(k), &self.footprint, self.closed) {
+                            Some(r) => r,
+                            None => return 0,
+                        }
+                    }
+                    Some(_) => return 0,
+                    None => self.footprint,
+                };
+                let Some(r) = tile_range(self.scheme, level, &fp, self.closed) else {
+                    return 0;
+                };
+                match within {
+                    // The intersection may touch neighbours of `within`; keep its descendants.
+                    Some(k) => {
+                        let shift = level - k.level();
+                        let (kx0, kx1) = (k.x() << shift, ((k.x() + 1) << shift) - 1);
+                        let (ky0, ky1) = (k.y() << shift, ((k.y() + 1) << shift) - 1);
+                        let x = (r.x.0.max(kx0), r.x.1.min(kx1));
+                        let y = (r.y.0.max(ky0), r.y.1.min(ky1));
+                        if x.0 > x.1 || y.0 > y.1 {
+                            0
+                        } else {
+                            u64::from(x.1 - x.0 + 1) * u64::from(y.1 - y.0 + 1)
+                        }
+                    }
+                    None => r.count(),
+                }
+            })
+            .sum()
+    }
+
+    /// Builds and writes every tile.
+    pub fn run(&self) -> Result<()> {
+        self.scheme
+            .roots()
+            .par_iter()
+            .map(|&root| self.build(root).map(|_| ()))
+            .collect()
+    }
+
+    fn build(&self, key: TileKey) -> Result<Option<L::Tile>> {
+        if !covers(self.scheme, key, &self.footprint, self.closed) {
+            return Ok(None);
+        }
+        let level = key.level();
+        if self.resume
+            && level >= self.min_level
+            && let Some(bytes) = self.sink.existing(key)?
+            // A tile cut short by the interruption does not decode: build it again.
+            && let Ok(tile) = self.layer.decode(key, &bytes)
+        {
+            // A parent is written after all its children, so its subtree is complete.
+            self.progress
+                .tiles
+                .fetch_add(self.count(Some(key)), Ordering::Relaxed);
+            return Ok(Some(tile));
+        }
+        let tile = match key.children() {
+            Some(children) if level < self.max_level => {
+                let built: Vec<Result<Option<L::Tile>>> =
+                    children.par_iter().map(|&c| self.build(c)).collect();
+                let mut kids: [Option<L::Tile>; 4] = [None, None, None, None];
+                for (slot, b) in kids.iter_mut().zip(built) {
+                    *slot = b?;
+                }
+                if level < self.min_level {
+                    return Ok(None);
+                }
+                self.layer.downsample(&kids)
+            }
+            _ => self.layer.leaf(self.scheme, key),
+        };
+        let bytes = self.layer.encode(key, &tile)?;
+        self.sink.put(key, &bytes)?;
+        self.progress.tiles.fetch_add(1, Ordering::Relaxed);
+        self.progress.written.fetch_add(1, Ordering::Relaxed);
+        self.progress
+            .bytes
+            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        Ok(Some(tile))
+    }
+}
+
+/// Prints [`Progress::line`] to stderr every `period` until `done` is set; used only when
+/// stderr is a terminal.
+pub fn report_progress(progress: &Progress, done: &std::sync::atomic::AtomicBool, start: Instant) {
+    use std::io::Write;
+    let period = Duration::from_millis(250);
+    while !done.load(Ordering::Relaxed) {
+        std::thread::sleep(period);
+        let mut err = std::io::stderr().lock();
+        let _ = write!(err, "\r\x1b[K{}", progress.line(start.elapsed()));
+        let _ = err.flush();
+    }
+    let _ = writeln!(
+        std::io::stderr(),
+        "\r\x1b[K{}",
+        progress.line(start.elapsed())
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_match_the_per_tile_test() {
+        let fp = GeoRect::from_degrees(11.0, 57.0, 12.0, 58.0);
+        for scheme in [TilingScheme::Geographic, TilingScheme::WebMercator] {
+            for closed in [false, true] {
+                for level in 0..9u8 {
+                    let r = tile_range(scheme, level, &fp, closed).unwrap();
+                    let mut n = 0;
+                    for y in 0..scheme.tiles_y(level) as u32 {
+                        for x in 0..scheme.tiles_x(level) as u32 {
+                            let k = TileKey::new(level, x, y);
+                            let inside = covers(scheme, k, &fp, closed);
+                            let in_range =
+                                (r.x.0..=r.x.1).contains(&x) && (r.y.0..=r.y.1).contains(&y);
+                            assert_eq!(inside, in_range, "{scheme:?} closed {closed} {k:?}");
+                            n += u64::from(inside);
+                        }
+                    }
+                    assert_eq!(n, r.count());
+                }
+            }
+        }
+        // Level 8 geographic tiles are 0.703125 degrees: 11..12 E spans columns 271..273,
+        // 57..58 N rows 45..46.
+        let r = tile_range(TilingScheme::Geographic, 8, &fp, false).unwrap();
+        assert_eq!((r.x, r.y), ((271, 273), (45, 46)));
+    }
+}
