@@ -9,7 +9,7 @@ use globus_app::engine::{CameraSpec, GlobeOptions};
 use globus_app::geo_cmd;
 use globus_app::offscreen::{Offscreen, save_png};
 use globus_app::path::CameraPath;
-use globus_app::tile_cmd::{self, TileArgs};
+use globus_app::tile_cmd::{self, MergeArgs, TileArgs};
 use globus_app::viewer::{self, ViewerOptions};
 use serde_json::json;
 
@@ -126,6 +126,24 @@ enum TileCommand {
     Dem(TileArgs),
     /// Imagery: a JPEG/PNG world image to JPEG, PNG or WebP tiles.
     Imagery(TileArgs),
+    /// Split a job into shards of roughly equal work and print the plan as JSON.
+    Plan {
+        /// Number of shards.
+        #[arg(long)]
+        shards: u32,
+        #[command(subcommand)]
+        job: TileJobCommand,
+    },
+    /// Join shard outputs into one pyramid.
+    Merge(MergeArgs),
+}
+
+#[derive(Subcommand)]
+enum TileJobCommand {
+    /// An elevation job (same options as `globus tile dem`).
+    Dem(TileArgs),
+    /// An imagery job (same options as `globus tile imagery`).
+    Imagery(TileArgs),
 }
 
 #[derive(Subcommand)]
@@ -197,6 +215,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let line = match command {
                 TileCommand::Dem(a) => tile_cmd::run("dem", &a)?,
                 TileCommand::Imagery(a) => tile_cmd::run("imagery", &a)?,
+                TileCommand::Plan { shards, job } => match job {
+                    TileJobCommand::Dem(a) => tile_cmd::plan(shards, "dem", &a)?,
+                    TileJobCommand::Imagery(a) => tile_cmd::plan(shards, "imagery", &a)?,
+                },
+                TileCommand::Merge(a) => tile_cmd::merge(&a)?,
             };
             println!("{line}");
             Ok(())

@@ -1,9 +1,10 @@
-//! `globus tile dem|imagery`: builds tile pyramids with `globus-tiler`.
+//! `globus tile dem|imagery|plan|merge`: builds tile pyramids with `globus-tiler`.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
+use globus_tiler::shard::{MergeJob, ShardSpec};
 use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob, TileLayout};
 use globus_tiling::{GeoRect, TilingScheme};
 
@@ -14,7 +15,7 @@ pub struct TileArgs {
     /// equirectangular projection covering --bounds.
     #[arg(long = "in", required = true, num_args = 1..)]
     pub inputs: Vec<PathBuf>,
-    /// Output: a directory ({z}/{x}/{y}.ext) or FILE.mbtiles.
+    /// Output: a directory ({z}/{x}/{y}.ext), FILE.mbtiles or FILE.pmtiles.
     #[arg(long)]
     pub out: PathBuf,
     /// Tiling scheme: geographic (two roots, EPSG:4326) or webmercator (EPSG:3857).
@@ -57,6 +58,27 @@ pub struct TileArgs {
     /// Number rows from the south in directory output (TMS) instead of from the north (XYZ).
     #[arg(long)]
     pub tms: bool,
+    /// Do one shard of the job: K/N, or N with K from JOB_COMPLETION_INDEX (Kubernetes
+    /// Indexed Job) or SLURM_ARRAY_TASK_ID (Slurm array). Join shards with `globus tile merge`.
+    #[arg(long)]
+    pub shard: Option<String>,
+}
+
+/// Options of `globus tile merge`.
+#[derive(Args, Clone, Debug)]
+pub struct MergeArgs {
+    /// The shard outputs (directories or MBTiles written with --shard).
+    #[arg(long = "in", required = true, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
+    /// The merged pyramid: a directory, FILE.mbtiles or FILE.pmtiles.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing output.
+    #[arg(long)]
+    pub force: bool,
+    /// Worker threads for the levels merge builds (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
 }
 
 fn parse_bounds(text: &str) -> anyhow::Result<GeoRect> {
@@ -121,7 +143,31 @@ pub fn job(kind: &str, a: &TileArgs) -> anyhow::Result<TileJob> {
         } else {
             TileLayout::Xyz
         },
+        shard: a
+            .shard
+            .as_deref()
+            .map(|text| ShardSpec::parse(text, |k| std::env::var(k).ok()))
+            .transpose()?,
     })
+}
+
+/// Runs `globus tile plan --shards N dem|imagery ...` and returns the plan as JSON.
+pub fn plan(shards: u32, kind: &str, a: &TileArgs) -> anyhow::Result<String> {
+    let job = job(kind, a)?;
+    Ok(globus_tiler::job::plan_shards(&job, shards)?
+        .to_json()
+        .to_string())
+}
+
+/// Runs `globus tile merge` and returns the JSON summary line.
+pub fn merge(a: &MergeArgs) -> anyhow::Result<String> {
+    let summary = globus_tiler::shard::merge(&MergeJob {
+        inputs: a.inputs.clone(),
+        output: a.out.clone(),
+        force: a.force,
+        threads: a.threads.unwrap_or(0),
+    })?;
+    Ok(summary.to_json().to_string())
 }
 
 /// Runs `globus tile dem|imagery` and returns the JSON summary line.

@@ -193,3 +193,91 @@ fn force_will_not_delete_a_directory_that_is_not_a_pyramid() {
     );
     assert!(dir.join("thesis.tex").exists());
 }
+
+#[test]
+fn plan_shards_by_environment_and_merge() {
+    let dir = scratch("shards");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let common = [
+        "--in",
+        s(&hgt),
+        "--scheme",
+        "webmercator",
+        "--max-level",
+        "10",
+    ];
+    let mut args = vec!["tile", "plan", "--shards", "2", "dem"];
+    args.extend(common);
+    args.extend(["--out", "unused"]);
+    let o = globus(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let plan: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(plan["shards"].as_array().unwrap().len(), 2, "{plan}");
+    let total = plan["total_tiles"].as_u64().unwrap();
+    // Shard indices from the schedulers' environment variables.
+    let parts = [dir.join("k8s"), dir.join("slurm")];
+    let envs = [("JOB_COMPLETION_INDEX", "0"), ("SLURM_ARRAY_TASK_ID", "1")];
+    for (part, (var, value)) in parts.iter().zip(envs) {
+        let mut args = vec!["tile", "dem"];
+        args.extend(common);
+        args.extend(["--shard", "2", "--out", s(part)]);
+        let o = Command::new(env!("CARGO_BIN_EXE_globus"))
+            .args(&args)
+            .env_remove("JOB_COMPLETION_INDEX")
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("SLURM_ARRAY_TASK_MIN")
+            .env(var, value)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let merged = dir.join("merged.mbtiles");
+    let o = globus(&[
+        "tile",
+        "merge",
+        "--in",
+        s(&parts[0]),
+        s(&parts[1]),
+        "--out",
+        s(&merged),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["tiles"].as_u64().unwrap(), total, "{v}");
+    // Merging one shard alone, or something that is not a shard, is refused.
+    fails_with_one_line(
+        &[
+            "tile",
+            "merge",
+            "--in",
+            s(&parts[1]),
+            "--out",
+            s(&dir.join("half.mbtiles")),
+        ],
+        &["shards 0 of 2 are missing"],
+    );
+    fails_with_one_line(
+        &[
+            "tile",
+            "merge",
+            "--in",
+            s(&hgt),
+            "--out",
+            s(&dir.join("bad.mbtiles")),
+        ],
+        &["N57E011.hgt", "not a finished shard output"],
+    );
+    fails_with_one_line(
+        &[
+            "tile",
+            "dem",
+            "--in",
+            s(&hgt),
+            "--shard",
+            "3/2",
+            "--out",
+            s(&dir.join("x")),
+        ],
+        &["--shard"],
+    );
+}

@@ -12,11 +12,12 @@ use crate::error::{Result, TilerError};
 use crate::fill::fill_voids;
 use crate::format::ImageFormat;
 use crate::input;
-use crate::layer::{ElevationLayer, ImageryLayer, Layer};
-use crate::pyramid::{Progress, Pyramid, report_progress};
+use crate::layer::{ElevationCodec, ElevationLayer, ImageryCodec, ImageryLayer, Layer, TileCodec};
+use crate::pyramid::{Handover, Progress, Pyramid, report_progress};
 use crate::raster::{ElevationRaster, ImageRaster, intersect};
 use crate::resample::SampleGrid;
-use crate::sink::{DirSink, MbTilesSink, PyramidMetadata, TileLayout, TileSink};
+use crate::shard::{self, ShardSpec};
+use crate::sink::{OutputOptions, OutputSink, PyramidMetadata, TileLayout};
 
 /// What the pyramid holds.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,6 +63,8 @@ pub struct TileJob {
     pub force: bool,
     /// Row order of directory output.
     pub layout: TileLayout,
+    /// Do only this shard of the job.
+    pub shard: Option<ShardSpec>,
 }
 
 /// The result of a job, printed as one JSON line.
@@ -249,133 +252,125 @@ fn native_level(
         .unwrap_or(24)
 }
 
-enum Sink {
-    Dir(DirSink),
-    MbTiles(MbTilesSink),
-}
-
-impl Sink {
-    fn as_dyn(&self) -> &dyn TileSink {
-        match self {
-            Sink::Dir(d) => d,
-            Sink::MbTiles(m) => m,
-        }
-    }
-
-    fn finish(self, meta: &PyramidMetadata) -> Result<()> {
-        match self {
-            Sink::Dir(d) => d.finish(meta),
-            Sink::MbTiles(m) => m.finish(meta),
-        }
-    }
-}
-
-fn open_sink(job: &TileJob, extension: &'static str) -> Result<Sink> {
-    let out = &job.output;
-    let ext = out
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
-    let exists = out.exists();
-    if exists && !job.force && !job.resume {
-        return Err(TilerError::output(
-            out,
-            "already exists; pass --force to replace it or --resume to continue it",
-        ));
-    }
-    match ext.as_str() {
-        "mbtiles" => Ok(Sink::MbTiles(MbTilesSink::create(
-            out, job.scheme, job.resume,
-        )?)),
-        "pmtiles" => Err(TilerError::output(
-            out,
-            "PMTiles output is not supported yet",
-        )),
-        _ => {
-            if exists && job.force && !job.resume {
-                remove_tile_dir(out)?;
-            }
-            Ok(Sink::Dir(DirSink::create(
-                out, job.scheme, job.layout, extension,
-            )?))
-        }
-    }
-}
-
-/// Removes a directory for `--force`, but only one that holds nothing but a pyramid
-/// (numbered level directories and `metadata.json`): a mistyped `--out ~` must not
-/// delete a home directory.
-fn remove_tile_dir(dir: &Path) -> Result<()> {
-    if !dir.is_dir() {
-        return std::fs::remove_file(dir).map_err(|e| TilerError::output(dir, e));
-    }
-    let entries = std::fs::read_dir(dir).map_err(|e| TilerError::output(dir, e))?;
-    for entry in entries {
-        let entry = entry.map_err(|e| TilerError::output(dir, e))?;
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        let is_level = name.parse::<u8>().is_ok() && entry.path().is_dir();
-        if !(is_level || name == crate::sink::dir::METADATA_FILE) {
-            return Err(TilerError::output(
-                dir,
-                format!("--force refuses to delete it: {name} is not part of a tile pyramid"),
-            ));
-        }
-    }
-    std::fs::remove_dir_all(dir).map_err(|e| TilerError::output(dir, e))
-}
-
-fn run_layer<L: Layer>(
-    job: &TileJob,
-    layer: &L,
-    footprint: GeoRect,
-    max_level: u8,
-    meta: PyramidMetadata,
-    voids_filled: usize,
-) -> Result<Summary> {
+/// Runs `pyramid` on a pool of `threads` workers (0: all cores), with a progress line on a
+/// terminal.
+pub(crate) fn run_pyramid<L: Layer>(pyramid: &Pyramid<'_, L>, threads: usize) -> Result<()> {
     let start = Instant::now();
-    let sink = open_sink(job, layer.extension())?;
-    let progress = Progress::default();
-    let closed = layer.grid() == SampleGrid::Corners;
-    let pyramid = Pyramid {
-        layer,
-        sink: sink.as_dyn(),
-        scheme: job.scheme,
-        footprint,
-        closed,
-        min_level: job.min_level,
-        max_level,
-        resume: job.resume,
-        progress: &progress,
-    };
-    progress.total.store(pyramid.count(None), Ordering::Relaxed);
-    let threads = job.threads.unwrap_or(0);
+    let progress = pyramid.progress;
+    progress.total.store(pyramid.count(), Ordering::Relaxed);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("globus-tile-{i}"))
         .build()
         .map_err(|e| TilerError::BadOptions(format!("--threads {threads}: {e}")))?;
     let done = AtomicBool::new(false);
-    let result = std::thread::scope(|s| {
+    std::thread::scope(|s| {
         if std::io::stderr().is_terminal() {
-            s.spawn(|| report_progress(&progress, &done, start));
+            s.spawn(|| report_progress(progress, &done, start));
         }
         let r = pool.install(|| pyramid.run());
         done.store(true, Ordering::Relaxed);
         r
-    });
-    result?;
-    sink.finish(&meta)?;
+    })
+}
+
+/// A job with its source read and its levels decided.
+struct Prepared<L> {
+    layer: L,
+    footprint: GeoRect,
+    max_level: u8,
+    meta: PyramidMetadata,
+    voids_filled: usize,
+}
+
+fn execute<L: Layer>(job: &TileJob, p: &Prepared<L>) -> Result<Summary> {
+    let start = Instant::now();
+    let codec = p.layer.codec();
+    let closed = codec.grid() == SampleGrid::Corners;
+    let levels = (job.min_level, p.max_level);
+    let (starts, write_levels, split) = match job.shard {
+        None => (job.scheme.roots().to_vec(), levels, None),
+        Some(spec) => {
+            let plan = shard::plan(job.scheme, &p.footprint, closed, levels, spec.count);
+            let mine = plan.shards[spec.index as usize].clone();
+            (
+                mine,
+                (plan.split_level, p.max_level),
+                Some(plan.split_level),
+            )
+        }
+    };
+    if job.shard.is_some() && is_pmtiles(&job.output) {
+        return Err(TilerError::output(
+            &job.output,
+            "write shards as directories or MBTiles; `globus tile merge` can then write PMTiles",
+        ));
+    }
+    let sink = OutputSink::open(
+        &job.output,
+        OutputOptions {
+            scheme: job.scheme,
+            layout: job.layout,
+            extension: codec.extension(),
+            force: job.force,
+            resume: job.resume,
+        },
+    )?;
+    let progress = Progress::default();
+    let handover = Handover::default();
+    let pyramid = Pyramid {
+        layer: &p.layer,
+        sink: sink.as_dyn(),
+        scheme: job.scheme,
+        footprint: p.footprint,
+        closed,
+        starts,
+        write_levels,
+        max_level: p.max_level,
+        resume: job.resume,
+        handover: split.map(|l| (l, &handover)),
+        progress: &progress,
+    };
+    run_pyramid(&pyramid, job.threads.unwrap_or(0))?;
+    sink.finish(&p.meta)?;
+    if let (Some(spec), Some(split_level)) = (job.shard, split) {
+        let tiles = handover
+            .into_inner()
+            .map_err(|_| TilerError::BadOptions("a worker panicked".into()))?;
+        shard::write_handover(
+            &job.output,
+            &shard::HandoverHeader {
+                meta: p.meta.clone(),
+                layout: job.layout,
+                jpeg_quality: match job.kind {
+                    JobKind::Imagery {
+                        format: ImageFormat::Jpeg { quality },
+                    } => Some(quality),
+                    _ => None,
+                },
+                footprint: p.footprint,
+                closed,
+                split_level,
+                shard: spec,
+            },
+            tiles,
+        )?;
+    }
     let written = progress.written.load(Ordering::Relaxed);
     Ok(Summary {
         tiles: written,
         tiles_reused: progress.tiles.load(Ordering::Relaxed) - written,
         bytes: progress.bytes.load(Ordering::Relaxed),
         seconds: start.elapsed().as_secs_f64(),
-        levels: (job.min_level, max_level),
-        voids_filled,
+        levels,
+        voids_filled: p.voids_filled,
     })
+}
+
+fn is_pmtiles(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("pmtiles"))
 }
 
 fn check_job(job: &TileJob) -> Result<()> {
@@ -390,6 +385,14 @@ fn check_job(job: &TileJob) -> Result<()> {
     }
     if let Some(b) = &job.bounds {
         check_bounds(b)?;
+    }
+    if let Some(spec) = job.shard
+        && (spec.count == 0 || spec.index >= spec.count)
+    {
+        return Err(TilerError::BadOptions(format!(
+            "--shard {}/{}: the index must be below the number of shards",
+            spec.index, spec.count
+        )));
     }
     if job.min_level > TileKey::MAX_LEVEL - 1 {
         return Err(TilerError::BadOptions(format!(
@@ -468,53 +471,99 @@ fn plan(
     })
 }
 
-/// Runs a job.
+fn prepare_elevation(
+    job: &TileJob,
+    encoding: ElevationEncoding,
+    height_scale: Option<f64>,
+) -> Result<Prepared<ElevationLayer>> {
+    let georeferenced = !matches!(input_kind(&job.inputs[0])?, InputKind::Image);
+    let (source, voids_filled) = read_elevation(job, height_scale)?;
+    let p = plan(
+        job,
+        source.footprint(),
+        georeferenced,
+        SampleGrid::Corners,
+        source.georef.lon_spacing_rad(),
+        "png",
+        Some(encoding),
+    )?;
+    Ok(Prepared {
+        layer: ElevationLayer {
+            source,
+            footprint: p.footprint,
+            codec: ElevationCodec {
+                size: job.tile_size,
+                encoding,
+            },
+        },
+        footprint: p.footprint,
+        max_level: p.max_level,
+        meta: p.meta,
+        voids_filled,
+    })
+}
+
+fn prepare_imagery(job: &TileJob, format: ImageFormat) -> Result<Prepared<ImageryLayer>> {
+    let source = read_imagery(job)?;
+    let p = plan(
+        job,
+        source.footprint(),
+        false,
+        SampleGrid::Cells,
+        source.georef.lon_spacing_rad(),
+        format.extension(),
+        None,
+    )?;
+    let opaque = source.data.iter().all(|px| px[3] == 255);
+    Ok(Prepared {
+        layer: ImageryLayer {
+            source,
+            opaque,
+            footprint: p.footprint,
+            codec: ImageryCodec {
+                size: job.tile_size,
+                format,
+            },
+        },
+        footprint: p.footprint,
+        max_level: p.max_level,
+        meta: p.meta,
+        voids_filled: 0,
+    })
+}
+
+/// Runs a job (or, with [`TileJob::shard`], one shard of it).
 pub fn run(job: &TileJob) -> Result<Summary> {
     check_job(job)?;
     match job.kind {
         JobKind::Dem {
             encoding,
             height_scale,
+        } => execute(job, &prepare_elevation(job, encoding, height_scale)?),
+        JobKind::Imagery { format } => execute(job, &prepare_imagery(job, format)?),
+    }
+}
+
+/// Splits a job into `shards` parts of roughly equal work (see [`shard::plan`]).
+pub fn plan_shards(job: &TileJob, shards: u32) -> Result<shard::ShardPlan> {
+    check_job(job)?;
+    if shards == 0 {
+        return Err(TilerError::BadOptions("--shards must be at least 1".into()));
+    }
+    let levels_of = |fp: GeoRect, max: u8, closed: bool| {
+        shard::plan(job.scheme, &fp, closed, (job.min_level, max), shards)
+    };
+    Ok(match job.kind {
+        JobKind::Dem {
+            encoding,
+            height_scale,
         } => {
-            let georeferenced = !matches!(input_kind(&job.inputs[0])?, InputKind::Image);
-            let (source, filled) = read_elevation(job, height_scale)?;
-            let p = plan(
-                job,
-                source.footprint(),
-                georeferenced,
-                SampleGrid::Corners,
-                source.georef.lon_spacing_rad(),
-                "png",
-                Some(encoding),
-            )?;
-            let layer = ElevationLayer {
-                source,
-                footprint: p.footprint,
-                size: job.tile_size,
-                encoding,
-            };
-            run_layer(job, &layer, p.footprint, p.max_level, p.meta, filled)
+            let p = prepare_elevation(job, encoding, height_scale)?;
+            levels_of(p.footprint, p.max_level, true)
         }
         JobKind::Imagery { format } => {
-            let source = read_imagery(job)?;
-            let p = plan(
-                job,
-                source.footprint(),
-                false,
-                SampleGrid::Cells,
-                source.georef.lon_spacing_rad(),
-                format.extension(),
-                None,
-            )?;
-            let opaque = source.data.iter().all(|p| p[3] == 255);
-            let layer = ImageryLayer {
-                source,
-                opaque,
-                footprint: p.footprint,
-                size: job.tile_size,
-                format,
-            };
-            run_layer(job, &layer, p.footprint, p.max_level, p.meta, 0)
+            let p = prepare_imagery(job, format)?;
+            levels_of(p.footprint, p.max_level, false)
         }
-    }
+    })
 }

@@ -1,6 +1,6 @@
-//! The two kinds of pyramid: elevation and imagery. Each knows how to make a tile at the
-//! finest level from the source, how to make a parent from its four children, and how to
-//! encode a tile.
+//! The two kinds of pyramid, elevation and imagery: codecs that make a parent from its four
+//! children and encode tiles ([`TileCodec`]), and layers that make the finest tiles from a
+//! source ([`Layer`]).
 
 use globus_tiling::{GeoRect, TileKey, TilingScheme};
 
@@ -10,14 +10,13 @@ use crate::format::{ImageFormat, encode_image, encode_png};
 use crate::raster::{ElevationRaster, ImageRaster};
 use crate::resample::{SampleGrid, tile_taps};
 
-/// What a pyramid is made of.
-pub trait Layer: Sync {
+/// How tiles of one kind are combined, encoded and decoded; needs no source, so shard
+/// merging can build the top of a pyramid from the tiles the shards handed over.
+pub trait TileCodec: Sync {
     /// A decoded tile.
-    type Tile: Send;
+    type Tile: Send + Sync + Clone;
     /// The sample grid of the tiles.
     fn grid(&self) -> SampleGrid;
-    /// The tile at the finest level, resampled from the source.
-    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Self::Tile;
     /// A tile from its children (north-west, north-east, south-west, south-east; `None`
     /// where a child lies outside the data).
     fn downsample(&self, children: &[Option<Self::Tile>; 4]) -> Self::Tile;
@@ -27,18 +26,142 @@ pub trait Layer: Sync {
     fn decode(&self, key: TileKey, bytes: &[u8]) -> Result<Self::Tile>;
     /// The file extension of its tiles.
     fn extension(&self) -> &'static str;
+    /// The tile's samples, exactly (little-endian), for handing a tile between machines.
+    fn tile_to_raw(&self, tile: &Self::Tile) -> Vec<u8>;
+    /// A tile from [`TileCodec::tile_to_raw`] bytes.
+    fn raw_to_tile(&self, key: TileKey, raw: &[u8]) -> Result<Self::Tile>;
 }
 
-/// Elevation tiles: `size` x `size` heights in metres on a [`SampleGrid::Corners`] grid.
+/// What a pyramid is made of: a codec and a way to make tiles at the finest level.
+pub trait Layer: Sync {
+    /// The codec of its tiles.
+    type Codec: TileCodec;
+    /// The codec.
+    fn codec(&self) -> &Self::Codec;
+    /// The tile at the finest level.
+    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<<Self::Codec as TileCodec>::Tile>;
+}
+
+/// Elevation tiles: `size` x `size` heights in metres on a [`SampleGrid::Corners`] grid,
+/// encoded as RGB PNG.
+#[derive(Clone, Copy, Debug)]
+pub struct ElevationCodec {
+    /// Samples per tile side.
+    pub size: usize,
+    /// How heights become RGB.
+    pub encoding: ElevationEncoding,
+}
+
+/// Imagery tiles: `size` x `size` straight RGBA cells.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageryCodec {
+    /// Pixels per tile side.
+    pub size: usize,
+    /// How tiles are written.
+    pub format: ImageFormat,
+}
+
+fn raw_size_error(key: TileKey, got: usize, want: usize) -> crate::error::TilerError {
+    crate::error::TilerError::Encode {
+        key,
+        problem: format!("handed-over tile has {got} bytes, expected {want}"),
+    }
+}
+
+impl TileCodec for ElevationCodec {
+    type Tile = Vec<f32>;
+
+    fn grid(&self) -> SampleGrid {
+        SampleGrid::Corners
+    }
+
+    fn downsample(&self, children: &[Option<Vec<f32>>; 4]) -> Vec<f32> {
+        downsample_corners(children, self.size)
+    }
+
+    fn encode(&self, key: TileKey, tile: &Vec<f32>) -> Result<Vec<u8>> {
+        let rgb: Vec<u8> = tile
+            .iter()
+            .flat_map(|&h| self.encoding.encode(f64::from(h)))
+            .collect();
+        encode_png(key, &rgb, self.size, 3)
+    }
+
+    fn decode(&self, key: TileKey, bytes: &[u8]) -> Result<Vec<f32>> {
+        let rgba = decode_rgba(key, bytes, self.size)?;
+        Ok(rgba
+            .iter()
+            .map(|p| self.encoding.decode([p[0], p[1], p[2]]) as f32)
+            .collect())
+    }
+
+    fn extension(&self) -> &'static str {
+        "png"
+    }
+
+    fn tile_to_raw(&self, tile: &Vec<f32>) -> Vec<u8> {
+        tile.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    fn raw_to_tile(&self, key: TileKey, raw: &[u8]) -> Result<Vec<f32>> {
+        let want = self.size * self.size * 4;
+        if raw.len() != want {
+            return Err(raw_size_error(key, raw.len(), want));
+        }
+        Ok(raw
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect())
+    }
+}
+
+impl TileCodec for ImageryCodec {
+    type Tile = Vec<[u8; 4]>;
+
+    fn grid(&self) -> SampleGrid {
+        SampleGrid::Cells
+    }
+
+    fn downsample(&self, children: &[Option<Vec<[u8; 4]>>; 4]) -> Vec<[u8; 4]> {
+        downsample_cells(children, self.size)
+    }
+
+    fn encode(&self, key: TileKey, tile: &Vec<[u8; 4]>) -> Result<Vec<u8>> {
+        encode_image(key, tile, self.size, self.format)
+    }
+
+    fn decode(&self, key: TileKey, bytes: &[u8]) -> Result<Vec<[u8; 4]>> {
+        decode_rgba(key, bytes, self.size)
+    }
+
+    fn extension(&self) -> &'static str {
+        self.format.extension()
+    }
+
+    fn tile_to_raw(&self, tile: &Vec<[u8; 4]>) -> Vec<u8> {
+        tile.as_flattened().to_vec()
+    }
+
+    fn raw_to_tile(&self, key: TileKey, raw: &[u8]) -> Result<Vec<[u8; 4]>> {
+        let want = self.size * self.size * 4;
+        if raw.len() != want {
+            return Err(raw_size_error(key, raw.len(), want));
+        }
+        Ok(raw
+            .chunks_exact(4)
+            .map(|p| [p[0], p[1], p[2], p[3]])
+            .collect())
+    }
+}
+
+/// Elevation tiles resampled from a raster.
 pub struct ElevationLayer {
     /// The (void-filled) source.
     pub source: ElevationRaster,
     /// Where the source has data, clipped to the requested bounds.
     pub footprint: GeoRect,
-    /// Samples per tile side.
-    pub size: usize,
-    /// How heights become RGB.
-    pub encoding: ElevationEncoding,
+    /// Tile size and encoding.
+    pub codec: ElevationCodec,
 }
 
 /// Height assigned outside the data's footprint: the ellipsoid (sea level), never a void
@@ -46,14 +169,14 @@ pub struct ElevationLayer {
 pub const OUTSIDE_HEIGHT_M: f32 = 0.0;
 
 impl Layer for ElevationLayer {
-    type Tile = Vec<f32>;
+    type Codec = ElevationCodec;
 
-    fn grid(&self) -> SampleGrid {
-        SampleGrid::Corners
+    fn codec(&self) -> &ElevationCodec {
+        &self.codec
     }
 
-    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Vec<f32> {
-        let n = self.size;
+    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<Vec<f32>> {
+        let n = self.codec.size;
         let src = &self.source;
         let (cols, rows) = tile_taps(
             scheme,
@@ -94,31 +217,7 @@ impl Layer for ElevationLayer {
                 }
             }
         }
-        out
-    }
-
-    fn downsample(&self, children: &[Option<Vec<f32>>; 4]) -> Vec<f32> {
-        downsample_corners(children, self.size)
-    }
-
-    fn encode(&self, key: TileKey, tile: &Vec<f32>) -> Result<Vec<u8>> {
-        let rgb: Vec<u8> = tile
-            .iter()
-            .flat_map(|&h| self.encoding.encode(f64::from(h)))
-            .collect();
-        encode_png(key, &rgb, self.size, 3)
-    }
-
-    fn decode(&self, key: TileKey, bytes: &[u8]) -> Result<Vec<f32>> {
-        let rgba = decode_rgba(key, bytes, self.size)?;
-        Ok(rgba
-            .iter()
-            .map(|p| self.encoding.decode([p[0], p[1], p[2]]) as f32)
-            .collect())
-    }
-
-    fn extension(&self) -> &'static str {
-        "png"
+        Ok(out)
     }
 }
 
@@ -160,29 +259,27 @@ pub fn downsample_corners(children: &[Option<Vec<f32>>; 4], n: usize) -> Vec<f32
     out
 }
 
-/// Imagery tiles: `size` x `size` straight RGBA cells.
+/// Imagery tiles resampled from an image.
 pub struct ImageryLayer {
     /// The source image.
     pub source: ImageRaster,
     /// Where the source has data, clipped to the requested bounds.
     pub footprint: GeoRect,
-    /// Pixels per tile side.
-    pub size: usize,
-    /// How tiles are written.
-    pub format: ImageFormat,
+    /// Tile size and format.
+    pub codec: ImageryCodec,
     /// Whether every source pixel is opaque (enables a faster resampler).
     pub opaque: bool,
 }
 
 impl Layer for ImageryLayer {
-    type Tile = Vec<[u8; 4]>;
+    type Codec = ImageryCodec;
 
-    fn grid(&self) -> SampleGrid {
-        SampleGrid::Cells
+    fn codec(&self) -> &ImageryCodec {
+        &self.codec
     }
 
-    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Vec<[u8; 4]> {
-        let n = self.size;
+    fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<Vec<[u8; 4]>> {
+        let n = self.codec.size;
         let src = &self.source;
         let (cols, rows) = tile_taps(
             scheme,
@@ -205,23 +302,7 @@ impl Layer for ImageryLayer {
         } else {
             resample_rgba::<false>(src, &cols, &rows, (c_lo, c_hi), &mut out, n);
         }
-        out
-    }
-
-    fn downsample(&self, children: &[Option<Vec<[u8; 4]>>; 4]) -> Vec<[u8; 4]> {
-        downsample_cells(children, self.size)
-    }
-
-    fn encode(&self, key: TileKey, tile: &Vec<[u8; 4]>) -> Result<Vec<u8>> {
-        encode_image(key, tile, self.size, self.format)
-    }
-
-    fn decode(&self, key: TileKey, bytes: &[u8]) -> Result<Vec<[u8; 4]>> {
-        decode_rgba(key, bytes, self.size)
-    }
-
-    fn extension(&self) -> &'static str {
-        self.format.extension()
+        Ok(out)
     }
 }
 

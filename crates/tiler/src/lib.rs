@@ -28,6 +28,7 @@ pub mod layer;
 pub mod pyramid;
 pub mod raster;
 pub mod resample;
+pub mod shard;
 pub mod sink;
 
 pub use encoding::ElevationEncoding;

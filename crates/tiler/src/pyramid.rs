@@ -11,7 +11,7 @@ use globus_tiling::{GeoRect, TileKey, TilingScheme};
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::layer::Layer;
+use crate::layer::{Layer, TileCodec};
 use crate::raster::intersect;
 use crate::sink::TileSink;
 
@@ -108,6 +108,10 @@ impl Progress {
     }
 }
 
+/// Tiles at a hand-over level, kept raw (exact samples) for building the levels above them
+/// elsewhere: see [`crate::shard`].
+pub type Handover = std::sync::Mutex<Vec<(TileKey, Vec<u8>)>>;
+
 /// One pyramid build.
 pub struct Pyramid<'a, L: Layer> {
     /// What the tiles are made of.
@@ -121,102 +125,132 @@ pub struct Pyramid<'a, L: Layer> {
     /// Whether tiles merely touching the footprint are made (corner grids, whose edge
     /// samples must exist on both sides of every edge).
     pub closed: bool,
-    /// Coarsest level written.
-    pub min_level: u8,
-    /// Finest level, resampled from the source.
+    /// The tiles the walk starts from: the scheme's roots, or one shard's share of a level.
+    pub starts: Vec<TileKey>,
+    /// The levels written, coarsest and finest.
+    pub write_levels: (u8, u8),
+    /// The finest level, made by [`Layer::leaf`].
     pub max_level: u8,
     /// Reuse tiles the sink already holds instead of rebuilding their subtrees.
     pub resume: bool,
+    /// Keep the raw tiles of this level (the shard hand-over level) here.
+    pub handover: Option<(u8, &'a Handover)>,
     /// Counters.
     pub progress: &'a Progress,
 }
 
+/// The number of tiles of `levels` over `footprint` below `within` (itself included).
+pub fn count_tiles(
+    scheme: TilingScheme,
+    footprint: &GeoRect,
+    closed: bool,
+    levels: (u8, u8),
+    within: TileKey,
+) -> u64 {
+    let Some(fp) = intersect(&scheme.rect(within), footprint, closed) else {
+        return 0;
+    };
+    (levels.0.max(within.level())..=levels.1)
+        .map(|level| {
+            let Some(r) = tile_range(scheme, level, &fp, closed) else {
+                return 0;
+            };
+            // The intersection may touch neighbours of `within`; keep its descendants.
+            let shift = level - within.level();
+            let (kx0, kx1) = (within.x() << shift, ((within.x() + 1) << shift) - 1);
+            let (ky0, ky1) = (within.y() << shift, ((within.y() + 1) << shift) - 1);
+            let x = (r.x.0.max(kx0), r.x.1.min(kx1));
+            let y = (r.y.0.max(ky0), r.y.1.min(ky1));
+            if x.0 > x.1 || y.0 > y.1 {
+                0
+            } else {
+                u64::from(x.1 - x.0 + 1) * u64::from(y.1 - y.0 + 1)
+            }
+        })
+        .sum()
+}
+
+type TileOf<L> = <<L as Layer>::Codec as TileCodec>::Tile;
+
 impl<L: Layer> Pyramid<'_, L> {
-    /// The number of tiles from `min_level` to `max_level` (below `within`, if given).
-    pub fn count(&self, within: Option<TileKey>) -> u64 {
-        (self.min_level..=self.max_level)
-            .map(|level| {
-                let fp = match within {
-                    Some(k) if k.level() <= level => {
-                        match intersect(&self.scheme.rect(k), &self.footprint, self.closed) {
-                            Some(r) => r,
-                            None => return 0,
-                        }
-                    }
-                    Some(_) => return 0,
-                    None => self.footprint,
-                };
-                let Some(r) = tile_range(self.scheme, level, &fp, self.closed) else {
-                    return 0;
-                };
-                match within {
-                    // The intersection may touch neighbours of `within`; keep its descendants.
-                    Some(k) => {
-                        let shift = level - k.level();
-                        let (kx0, kx1) = (k.x() << shift, ((k.x() + 1) << shift) - 1);
-                        let (ky0, ky1) = (k.y() << shift, ((k.y() + 1) << shift) - 1);
-                        let x = (r.x.0.max(kx0), r.x.1.min(kx1));
-                        let y = (r.y.0.max(ky0), r.y.1.min(ky1));
-                        if x.0 > x.1 || y.0 > y.1 {
-                            0
-                        } else {
-                            u64::from(x.1 - x.0 + 1) * u64::from(y.1 - y.0 + 1)
-                        }
-                    }
-                    None => r.count(),
-                }
-            })
-            .sum()
+    /// The number of tiles this build writes (or finds written).
+    pub fn count(&self) -> u64 {
+        self.starts.iter().map(|&k| self.count_below(k)).sum()
+    }
+
+    fn count_below(&self, key: TileKey) -> u64 {
+        count_tiles(
+            self.scheme,
+            &self.footprint,
+            self.closed,
+            self.write_levels,
+            key,
+        )
     }
 
     /// Builds and writes every tile.
     pub fn run(&self) -> Result<()> {
-        self.scheme
-            .roots()
+        self.starts
             .par_iter()
-            .map(|&root| self.build(root).map(|_| ()))
+            .map(|&start| self.build(start).map(|_| ()))
             .collect()
     }
 
-    fn build(&self, key: TileKey) -> Result<Option<L::Tile>> {
+    fn writes(&self, level: u8) -> bool {
+        (self.write_levels.0..=self.write_levels.1).contains(&level)
+    }
+
+    fn build(&self, key: TileKey) -> Result<Option<TileOf<L>>> {
         if !covers(self.scheme, key, &self.footprint, self.closed) {
             return Ok(None);
         }
         let level = key.level();
+        let codec = self.layer.codec();
+        let handover_here = matches!(self.handover, Some((l, _)) if l == level);
         if self.resume
-            && level >= self.min_level
+            && self.writes(level)
+            && !handover_here
             && let Some(bytes) = self.sink.existing(key)?
             // A tile cut short by the interruption does not decode: build it again.
-            && let Ok(tile) = self.layer.decode(key, &bytes)
+            && let Ok(tile) = codec.decode(key, &bytes)
         {
             // A parent is written after all its children, so its subtree is complete.
             self.progress
                 .tiles
-                .fetch_add(self.count(Some(key)), Ordering::Relaxed);
+                .fetch_add(self.count_below(key), Ordering::Relaxed);
             return Ok(Some(tile));
         }
         let tile = match key.children() {
             Some(children) if level < self.max_level => {
-                let built: Vec<Result<Option<L::Tile>>> =
+                let built: Vec<Result<Option<TileOf<L>>>> =
                     children.par_iter().map(|&c| self.build(c)).collect();
-                let mut kids: [Option<L::Tile>; 4] = [None, None, None, None];
+                let mut kids: [Option<TileOf<L>>; 4] = [None, None, None, None];
                 for (slot, b) in kids.iter_mut().zip(built) {
                     *slot = b?;
                 }
-                if level < self.min_level {
+                if level < self.write_levels.0 && !handover_here {
                     return Ok(None);
                 }
-                self.layer.downsample(&kids)
+                codec.downsample(&kids)
             }
-            _ => self.layer.leaf(self.scheme, key),
+            _ => self.layer.leaf(self.scheme, key)?,
         };
-        let bytes = self.layer.encode(key, &tile)?;
-        self.sink.put(key, &bytes)?;
-        self.progress.tiles.fetch_add(1, Ordering::Relaxed);
-        self.progress.written.fetch_add(1, Ordering::Relaxed);
-        self.progress
-            .bytes
-            .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        if let Some((_, store)) = self.handover.filter(|_| handover_here) {
+            let raw = codec.tile_to_raw(&tile);
+            store
+                .lock()
+                .map_err(|_| crate::error::TilerError::BadOptions("a worker panicked".into()))?
+                .push((key, raw));
+        }
+        if self.writes(level) {
+            let bytes = codec.encode(key, &tile)?;
+            self.sink.put(key, &bytes)?;
+            self.progress.tiles.fetch_add(1, Ordering::Relaxed);
+            self.progress.written.fetch_add(1, Ordering::Relaxed);
+            self.progress
+                .bytes
+                .fetch_add(bytes.len() as u64, Ordering::Relaxed);
+        }
         Ok(Some(tile))
     }
 }

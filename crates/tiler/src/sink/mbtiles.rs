@@ -10,7 +10,7 @@ use std::sync::Mutex;
 use globus_tiling::{TileKey, TilingScheme};
 use rusqlite::{Connection, OptionalExtension, params};
 
-use super::{PyramidMetadata, TileSink};
+use super::{PyramidMetadata, TileSink, with_suffix};
 use crate::error::{Result, TilerError};
 
 /// Writes tiles into an MBTiles file.
@@ -19,12 +19,6 @@ pub struct MbTilesSink {
     partial: PathBuf,
     scheme: TilingScheme,
     db: Mutex<Connection>,
-}
-
-fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(suffix);
-    PathBuf::from(s)
 }
 
 impl MbTilesSink {

@@ -1,16 +1,20 @@
-//! Where tiles go: a directory tree or an MBTiles file. Every container is written under a
+//! Where tiles go: a directory tree, an MBTiles file or a PMTiles archive. Every container is written under a
 //! temporary name or without its completion marker until [`TileSink::finish`], so an
 //! interrupted run never leaves output that looks complete.
 
 pub mod dir;
 pub mod mbtiles;
+pub mod pmtiles;
 
 pub use dir::{DirSink, TileLayout};
 pub use mbtiles::MbTilesSink;
+pub use pmtiles::PmTilesSink;
+
+use std::path::Path;
 
 use globus_tiling::{GeoRect, TileKey, TilingScheme};
 
-use crate::error::Result;
+use crate::error::{Result, TilerError};
 
 /// What is known about a finished pyramid, written into the container's metadata.
 #[derive(Clone, Debug)]
@@ -61,10 +65,129 @@ impl PyramidMetadata {
     }
 }
 
+/// `path` with `suffix` appended to its file name (`a.mbtiles` -> `a.mbtiles.partial`).
+pub(crate) fn with_suffix(path: &Path, suffix: &str) -> std::path::PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(suffix);
+    s.into()
+}
+
 /// A destination for encoded tiles, shared by the worker threads.
 pub trait TileSink: Sync {
     /// Stores one tile.
     fn put(&self, key: TileKey, bytes: &[u8]) -> Result<()>;
     /// The bytes of a tile already stored (by an earlier, interrupted run), for `--resume`.
     fn existing(&self, key: TileKey) -> Result<Option<Vec<u8>>>;
+}
+
+/// An open output of any kind.
+pub enum OutputSink {
+    /// A directory tree.
+    Dir(DirSink),
+    /// An MBTiles file.
+    MbTiles(MbTilesSink),
+    /// A PMTiles archive.
+    PmTiles(PmTilesSink),
+}
+
+impl OutputSink {
+    /// The sink as a trait object for the workers.
+    pub fn as_dyn(&self) -> &dyn TileSink {
+        match self {
+            OutputSink::Dir(d) => d,
+            OutputSink::MbTiles(m) => m,
+            OutputSink::PmTiles(p) => p,
+        }
+    }
+
+    /// Finishes the container (metadata, final name).
+    pub fn finish(self, meta: &PyramidMetadata) -> Result<()> {
+        match self {
+            OutputSink::Dir(d) => d.finish(meta),
+            OutputSink::MbTiles(m) => m.finish(meta),
+            OutputSink::PmTiles(p) => p.finish(meta),
+        }
+    }
+}
+
+/// How to open an output.
+#[derive(Clone, Copy, Debug)]
+pub struct OutputOptions {
+    /// The tiling scheme of the tiles.
+    pub scheme: TilingScheme,
+    /// Row order of directory output.
+    pub layout: TileLayout,
+    /// File extension of the tiles (directory output).
+    pub extension: &'static str,
+    /// Replace an existing output.
+    pub force: bool,
+    /// Continue an existing output.
+    pub resume: bool,
+}
+
+impl OutputSink {
+    /// Opens `out` by its name: `*.mbtiles`, `*.pmtiles`, else a directory. An existing
+    /// output is refused unless `force` (replace) or `resume` (continue).
+    pub fn open(out: &Path, o: OutputOptions) -> Result<Self> {
+        let ext = out
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        let exists = out.exists();
+        if exists && !o.force && !o.resume {
+            return Err(TilerError::output(
+                out,
+                "already exists; pass --force to replace it or --resume to continue it",
+            ));
+        }
+        match ext.as_str() {
+            "mbtiles" => Ok(OutputSink::MbTiles(MbTilesSink::create(
+                out, o.scheme, o.resume,
+            )?)),
+            "pmtiles" => {
+                if o.resume {
+                    return Err(TilerError::output(
+                        out,
+                        "--resume works with directory and MBTiles output, not PMTiles",
+                    ));
+                }
+                Ok(OutputSink::PmTiles(PmTilesSink::create(out, o.scheme)?))
+            }
+            _ => {
+                if exists && o.force && !o.resume {
+                    remove_tile_dir(out)?;
+                }
+                Ok(OutputSink::Dir(DirSink::create(
+                    out,
+                    o.scheme,
+                    o.layout,
+                    o.extension,
+                )?))
+            }
+        }
+    }
+}
+
+/// Removes a directory for `--force`, but only one that holds nothing but a pyramid
+/// (numbered level directories and `metadata.json`): a mistyped `--out ~` must not
+/// delete a home directory.
+fn remove_tile_dir(dir: &Path) -> Result<()> {
+    if !dir.is_dir() {
+        return std::fs::remove_file(dir).map_err(|e| TilerError::output(dir, e));
+    }
+    let entries = std::fs::read_dir(dir).map_err(|e| TilerError::output(dir, e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| TilerError::output(dir, e))?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        let is_level = name.parse::<u8>().is_ok() && entry.path().is_dir();
+        if !(is_level || name == dir::METADATA_FILE) {
+            return Err(TilerError::output(
+                dir,
+                format!("--force refuses to delete it: {name} is not part of a tile pyramid"),
+            ));
+        }
+    }
+    std::fs::remove_dir_all(dir).map_err(|e| TilerError::output(dir, e))
 }

@@ -25,6 +25,7 @@ pub fn job(kind: JobKind, inputs: &[PathBuf], out: &Path, scheme: TilingScheme) 
         resume: false,
         force: true,
         layout: TileLayout::Xyz,
+        shard: None,
     }
 }
 
