@@ -123,11 +123,11 @@ fn input_kind(path: &Path) -> Result<InputKind> {
     }
 }
 
-fn single_image(job: &TileJob) -> Result<&Path> {
+fn single_input<'a>(job: &'a TileJob, what: &str) -> Result<&'a Path> {
     match job.inputs.as_slice() {
         [one] => Ok(one),
         _ => Err(TilerError::BadOptions(format!(
-            "a plain image input must be the only input ({} given)",
+            "a {what} input must be the only input ({} given)",
             job.inputs.len()
         ))),
     }
@@ -171,7 +171,7 @@ fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(Elevation
             input::read_hgt_mosaic(&job.inputs)?
         }
         InputKind::Image => {
-            let path = single_image(job)?;
+            let path = single_input(job, "plain image")?;
             let scale = height_scale.ok_or_else(|| {
                 TilerError::bad_input(
                     path,
@@ -181,10 +181,16 @@ fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(Elevation
             input::read_grey_elevation(path, job.bounds.unwrap_or(GeoRect::WORLD), scale)?
         }
         InputKind::GeoTiff => {
-            return Err(TilerError::bad_input(
-                first,
-                "GeoTIFF input is not supported yet; convert it to .hgt or a plain image",
-            ));
+            let path = single_input(job, "GeoTIFF")?;
+            match input::read_geotiff(path)? {
+                input::GeoTiff::Elevation(r) => r,
+                input::GeoTiff::Image(_) => {
+                    return Err(TilerError::bad_input(
+                        path,
+                        "holds colour imagery; use `globus tile imagery` for it",
+                    ));
+                }
+            }
         }
     };
     let filled = fill_voids(&mut raster.data, raster.width, raster.height)
@@ -193,17 +199,20 @@ fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(Elevation
 }
 
 fn read_imagery(job: &TileJob) -> Result<ImageRaster> {
-    let path = single_image(job)?;
+    let path = single_input(job, "imagery")?;
     match input_kind(path)? {
         InputKind::Image => input::read_world_image(path, job.bounds.unwrap_or(GeoRect::WORLD)),
         InputKind::Hgt => Err(TilerError::bad_input(
             path,
             "is elevation; use `globus tile dem` for it",
         )),
-        InputKind::GeoTiff => Err(TilerError::bad_input(
-            path,
-            "GeoTIFF input is not supported yet; convert it to a plain JPEG/PNG with --bounds",
-        )),
+        InputKind::GeoTiff => match input::read_geotiff(path)? {
+            input::GeoTiff::Image(r) => Ok(r),
+            input::GeoTiff::Elevation(_) => Err(TilerError::bad_input(
+                path,
+                "holds elevation (one numeric band); use `globus tile dem` for it",
+            )),
+        },
     }
 }
 
@@ -505,10 +514,11 @@ fn prepare_elevation(
 
 fn prepare_imagery(job: &TileJob, format: ImageFormat) -> Result<Prepared<ImageryLayer>> {
     let source = read_imagery(job)?;
+    let georeferenced = matches!(input_kind(&job.inputs[0])?, InputKind::GeoTiff);
     let p = plan(
         job,
         source.footprint(),
-        false,
+        georeferenced,
         SampleGrid::Cells,
         source.georef.lon_spacing_rad(),
         format.extension(),
