@@ -14,7 +14,7 @@ use crate::format::ImageFormat;
 use crate::input;
 use crate::layer::{ElevationCodec, ElevationLayer, ImageryCodec, ImageryLayer, Layer, TileCodec};
 use crate::pyramid::{Handover, Progress, Pyramid, report_progress};
-use crate::raster::{ElevationRaster, ImageRaster, intersect};
+use crate::raster::{ImageRaster, RowSource, intersect};
 use crate::resample::SampleGrid;
 use crate::shard::{self, ShardSpec};
 use crate::sink::{OutputOptions, OutputSink, PyramidMetadata, TileLayout};
@@ -154,7 +154,12 @@ fn check_bounds(b: &GeoRect) -> Result<()> {
     }
 }
 
-fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(ElevationRaster, usize)> {
+/// The elevation source and the number of voids filled while reading it (a mosaic of SRTM
+/// files fills its voids as files load; see [`RowSource::voids_filled`]).
+fn read_elevation(
+    job: &TileJob,
+    height_scale: Option<f64>,
+) -> Result<(Box<dyn RowSource<f32>>, usize)> {
     let first = job
         .inputs
         .first()
@@ -168,7 +173,7 @@ fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(Elevation
             {
                 return Err(TilerError::bad_input(p, "cannot be mixed with .hgt inputs"));
             }
-            input::read_hgt_mosaic(&job.inputs)?
+            return Ok((Box::new(input::read_hgt_mosaic(&job.inputs)?), 0));
         }
         InputKind::Image => {
             let path = single_input(job, "plain image")?;
@@ -195,7 +200,7 @@ fn read_elevation(job: &TileJob, height_scale: Option<f64>) -> Result<(Elevation
     };
     let filled = fill_voids(&mut raster.data, raster.width, raster.height)
         .ok_or_else(|| TilerError::bad_input(first, "has no valid elevation sample (all voids)"))?;
-    Ok((raster, filled))
+    Ok((Box::new(raster), filled))
 }
 
 fn read_imagery(job: &TileJob) -> Result<ImageRaster> {
@@ -372,7 +377,7 @@ fn execute<L: Layer>(job: &TileJob, p: &Prepared<L>) -> Result<Summary> {
         bytes: progress.bytes.load(Ordering::Relaxed),
         seconds: start.elapsed().as_secs_f64(),
         levels,
-        voids_filled: p.voids_filled,
+        voids_filled: p.voids_filled + p.layer.voids_filled(),
     })
 }
 
@@ -492,7 +497,7 @@ fn prepare_elevation(
         source.footprint(),
         georeferenced,
         SampleGrid::Corners,
-        source.georef.lon_spacing_rad(),
+        source.georef().lon_spacing_rad(),
         "png",
         Some(encoding),
     )?;

@@ -7,7 +7,7 @@ use globus_tiling::{GeoRect, TileKey, TilingScheme};
 use crate::encoding::ElevationEncoding;
 use crate::error::Result;
 use crate::format::{ImageFormat, encode_image, encode_png};
-use crate::raster::{ElevationRaster, ImageRaster};
+use crate::raster::{ImageRaster, RowSource};
 use crate::resample::{SampleGrid, tile_taps};
 
 /// How tiles of one kind are combined, encoded and decoded; needs no source, so shard
@@ -40,6 +40,10 @@ pub trait Layer: Sync {
     fn codec(&self) -> &Self::Codec;
     /// The tile at the finest level.
     fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<<Self::Codec as TileCodec>::Tile>;
+    /// Source voids filled while making leaves (sources that load lazily).
+    fn voids_filled(&self) -> usize {
+        0
+    }
 }
 
 /// Elevation tiles: `size` x `size` heights in metres on a [`SampleGrid::Corners`] grid,
@@ -157,7 +161,7 @@ impl TileCodec for ImageryCodec {
 /// Elevation tiles resampled from a raster.
 pub struct ElevationLayer {
     /// The (void-filled) source.
-    pub source: ElevationRaster,
+    pub source: Box<dyn RowSource<f32>>,
     /// Where the source has data, clipped to the requested bounds.
     pub footprint: GeoRect,
     /// Tile size and encoding.
@@ -175,17 +179,21 @@ impl Layer for ElevationLayer {
         &self.codec
     }
 
+    fn voids_filled(&self) -> usize {
+        self.source.voids_filled()
+    }
+
     fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<Vec<f32>> {
         let n = self.codec.size;
-        let src = &self.source;
+        let src = &*self.source;
         let (cols, rows) = tile_taps(
             scheme,
             key,
             SampleGrid::Corners,
             n,
-            &src.georef,
+            src.georef(),
             &self.footprint,
-            (src.width, src.height),
+            (src.width(), src.height()),
         );
         let mut out = vec![OUTSIDE_HEIGHT_M; n * n];
         // Separable: a vertical pass over the source columns the tile touches, then the
@@ -194,15 +202,17 @@ impl Layer for ElevationLayer {
             .taps
             .iter()
             .fold((u32::MAX, 0), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
-        let mut line = vec![0.0f32; (c_hi - c_lo + 1) as usize];
+        let span = (c_hi - c_lo + 1) as usize;
+        let mut line = vec![0.0f32; span];
+        let mut src_row = vec![0.0f32; span];
         for j in 0..n {
             if !rows.inside[j] {
                 continue;
             }
             line.fill(0.0);
             for &(r, wr) in rows.of(j) {
-                let src_row = &src.data[r as usize * src.width..][c_lo as usize..=c_hi as usize];
-                for (l, &v) in line.iter_mut().zip(src_row) {
+                src.read_row(r as usize, c_lo as usize, &mut src_row)?;
+                for (l, &v) in line.iter_mut().zip(&src_row) {
                     *l += wr * v;
                 }
             }

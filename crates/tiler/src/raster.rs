@@ -163,6 +163,46 @@ impl<T: Copy> Raster<T> {
     }
 }
 
+/// A source of samples read a row segment at a time: a raster in memory, or a mosaic of
+/// files loaded on demand ([`crate::input::HgtMosaic`]) so that memory stays bounded.
+pub trait RowSource<T>: Send + Sync {
+    /// Columns.
+    fn width(&self) -> usize;
+    /// Rows.
+    fn height(&self) -> usize;
+    /// Where it lies.
+    fn georef(&self) -> &Georef;
+    /// Copies samples `c0 .. c0 + out.len()` of `row` into `out`.
+    fn read_row(&self, row: usize, c0: usize, out: &mut [T]) -> crate::error::Result<()>;
+    /// Voids filled so far (sources that fill as they load).
+    fn voids_filled(&self) -> usize {
+        0
+    }
+    /// The region the data covers, radians.
+    fn footprint(&self) -> GeoRect {
+        self.georef().footprint(self.width(), self.height())
+    }
+}
+
+impl<T: Copy + Send + Sync> RowSource<T> for Raster<T> {
+    fn width(&self) -> usize {
+        self.width
+    }
+
+    fn height(&self) -> usize {
+        self.height
+    }
+
+    fn georef(&self) -> &Georef {
+        &self.georef
+    }
+
+    fn read_row(&self, row: usize, c0: usize, out: &mut [T]) -> crate::error::Result<()> {
+        out.copy_from_slice(&self.data[row * self.width + c0..][..out.len()]);
+        Ok(())
+    }
+}
+
 /// An elevation raster: metres, `NaN` where the source had no data.
 pub type ElevationRaster = Raster<f32>;
 
