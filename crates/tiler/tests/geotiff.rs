@@ -79,6 +79,28 @@ fn srtm_as_geotiff_gives_the_same_tiles_as_the_hgt_file() {
             ),
             "raw",
         ),
+        (
+            gdal(
+                "gdal_translate",
+                &[
+                    "-co",
+                    "TILED=YES",
+                    "-co",
+                    "BLOCKXSIZE=128",
+                    "-co",
+                    "BLOCKYSIZE=64",
+                    "-co",
+                    "COMPRESS=LZW",
+                    "-co",
+                    "PREDICTOR=2",
+                    "-co",
+                    "ENDIANNESS=BIG",
+                    hgt_str,
+                ],
+                "tiled-lzw-predictor-bigendian.tif",
+            ),
+            "lzw-predictor-big-endian",
+        ),
     ];
     for (tif, name) in variants {
         let (_, out) = tiles_of(&tif, dem(), TilingScheme::Geographic, 9, name);
@@ -173,6 +195,27 @@ fn imagery_geotiff_matches_the_jpeg_pyramid() {
             / ia.as_raw().len() as f64;
         assert!(diff < 1.0, "{name}: mean difference {diff}");
     }
+}
+
+#[test]
+fn truncated_geotiff_is_refused_with_its_name() {
+    let tif = gdal(
+        "gdal_translate",
+        &[
+            "-co",
+            "COMPRESS=DEFLATE",
+            shared_data("N57E011.hgt").to_str().unwrap(),
+        ],
+        "whole.tif",
+    );
+    let bytes = std::fs::read(&tif).unwrap();
+    let cut = output_dir("tiler_geotiff").join("cut.tif");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = fresh("tiler_geotiff", "cut");
+    let e = globus_tiler::run(&job(dem(), &[cut], &out, TilingScheme::Geographic))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cut.tif") && e.contains("truncated"), "{e}");
 }
 
 #[test]
