@@ -281,3 +281,30 @@ fn plan_shards_by_environment_and_merge() {
         &["--shard"],
     );
 }
+
+#[test]
+fn a_full_disk_ends_with_one_line_and_no_finished_archive() {
+    let dir = scratch("full");
+    let out = dir.join("world.pmtiles");
+    // Tile data goes to world.pmtiles.partial first: point it at /dev/full, a device that
+    // answers every write with "no space left on device".
+    std::os::unix::fs::symlink("/dev/full", dir.join("world.pmtiles.partial")).unwrap();
+    let bmng = globus_test_support::shared_data("bmng-5400x2700.jpg");
+    fails_with_one_line(
+        &[
+            "tile",
+            "imagery",
+            "--in",
+            s(&bmng),
+            "--out",
+            s(&out),
+            "--max-level",
+            "1",
+        ],
+        &["world.pmtiles.partial", "No space left on device"],
+    );
+    assert!(
+        !out.exists(),
+        "a failed run left a finished-looking archive"
+    );
+}

@@ -14,7 +14,7 @@ use crate::format::ImageFormat;
 use crate::input;
 use crate::layer::{ElevationCodec, ElevationLayer, ImageryCodec, ImageryLayer, Layer, TileCodec};
 use crate::pyramid::{Handover, Progress, Pyramid, report_progress};
-use crate::raster::{ImageRaster, RowSource, intersect};
+use crate::raster::{RowSource, intersect};
 use crate::resample::SampleGrid;
 use crate::shard::{self, ShardSpec};
 use crate::sink::{OutputOptions, OutputSink, PyramidMetadata, TileLayout};
@@ -189,7 +189,8 @@ fn read_elevation(
             let path = single_input(job, "GeoTIFF")?;
             match input::read_geotiff(path)? {
                 input::GeoTiff::Elevation(r) => r,
-                input::GeoTiff::Image(_) => {
+                input::GeoTiff::ElevationStream(source) => return Ok((source, 0)),
+                input::GeoTiff::Image { .. } => {
                     return Err(TilerError::bad_input(
                         path,
                         "holds colour imagery; use `globus tile imagery` for it",
@@ -203,20 +204,30 @@ fn read_elevation(
     Ok((Box::new(raster), filled))
 }
 
-fn read_imagery(job: &TileJob) -> Result<ImageRaster> {
+/// An imagery source read a row at a time.
+type ImageSource = Box<dyn RowSource<[u8; 4]>>;
+
+/// The imagery source and whether it is fully opaque.
+fn read_imagery(job: &TileJob) -> Result<(ImageSource, bool)> {
     let path = single_input(job, "imagery")?;
     match input_kind(path)? {
-        InputKind::Image => input::read_world_image(path, job.bounds.unwrap_or(GeoRect::WORLD)),
+        InputKind::Image => {
+            let r = input::read_world_image(path, job.bounds.unwrap_or(GeoRect::WORLD))?;
+            let opaque = r.data.iter().all(|px| px[3] == 255);
+            Ok((Box::new(r), opaque))
+        }
         InputKind::Hgt => Err(TilerError::bad_input(
             path,
             "is elevation; use `globus tile dem` for it",
         )),
         InputKind::GeoTiff => match input::read_geotiff(path)? {
-            input::GeoTiff::Image(r) => Ok(r),
-            input::GeoTiff::Elevation(_) => Err(TilerError::bad_input(
-                path,
-                "holds elevation (one numeric band); use `globus tile dem` for it",
-            )),
+            input::GeoTiff::Image { source, opaque } => Ok((source, opaque)),
+            input::GeoTiff::Elevation(_) | input::GeoTiff::ElevationStream(_) => {
+                Err(TilerError::bad_input(
+                    path,
+                    "holds elevation (one numeric band); use `globus tile dem` for it",
+                ))
+            }
         },
     }
 }
@@ -518,18 +529,17 @@ fn prepare_elevation(
 }
 
 fn prepare_imagery(job: &TileJob, format: ImageFormat) -> Result<Prepared<ImageryLayer>> {
-    let source = read_imagery(job)?;
+    let (source, opaque) = read_imagery(job)?;
     let georeferenced = matches!(input_kind(&job.inputs[0])?, InputKind::GeoTiff);
     let p = plan(
         job,
         source.footprint(),
         georeferenced,
         SampleGrid::Cells,
-        source.georef.lon_spacing_rad(),
+        source.georef().lon_spacing_rad(),
         format.extension(),
         None,
     )?;
-    let opaque = source.data.iter().all(|px| px[3] == 255);
     Ok(Prepared {
         layer: ImageryLayer {
             source,

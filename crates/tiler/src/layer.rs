@@ -7,7 +7,7 @@ use globus_tiling::{GeoRect, TileKey, TilingScheme};
 use crate::encoding::ElevationEncoding;
 use crate::error::Result;
 use crate::format::{ImageFormat, encode_image, encode_png};
-use crate::raster::{ImageRaster, RowSource};
+use crate::raster::RowSource;
 use crate::resample::{SampleGrid, tile_taps};
 
 /// How tiles of one kind are combined, encoded and decoded; needs no source, so shard
@@ -272,7 +272,7 @@ pub fn downsample_corners(children: &[Option<Vec<f32>>; 4], n: usize) -> Vec<f32
 /// Imagery tiles resampled from an image.
 pub struct ImageryLayer {
     /// The source image.
-    pub source: ImageRaster,
+    pub source: Box<dyn RowSource<[u8; 4]>>,
     /// Where the source has data, clipped to the requested bounds.
     pub footprint: GeoRect,
     /// Tile size and format.
@@ -290,15 +290,15 @@ impl Layer for ImageryLayer {
 
     fn leaf(&self, scheme: TilingScheme, key: TileKey) -> Result<Vec<[u8; 4]>> {
         let n = self.codec.size;
-        let src = &self.source;
+        let src = &*self.source;
         let (cols, rows) = tile_taps(
             scheme,
             key,
             SampleGrid::Cells,
             n,
-            &src.georef,
+            src.georef(),
             &self.footprint,
-            (src.width, src.height),
+            (src.width(), src.height()),
         );
         let mut out = vec![[0u8; 4]; n * n];
         // Separable: a vertical pass into premultiplied RGBA over the source columns the tile
@@ -308,9 +308,9 @@ impl Layer for ImageryLayer {
             .iter()
             .fold((u32::MAX, 0), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
         if self.opaque {
-            resample_rgba::<true>(src, &cols, &rows, (c_lo, c_hi), &mut out, n);
+            resample_rgba::<true>(src, &cols, &rows, (c_lo, c_hi), &mut out, n)?;
         } else {
-            resample_rgba::<false>(src, &cols, &rows, (c_lo, c_hi), &mut out, n);
+            resample_rgba::<false>(src, &cols, &rows, (c_lo, c_hi), &mut out, n)?;
         }
         Ok(out)
     }
@@ -319,22 +319,24 @@ impl Layer for ImageryLayer {
 /// Separable resampling of RGBA: a vertical pass into premultiplied sums over the source
 /// columns `c_lo..=c_hi`, then the horizontal taps. `OPAQUE` sources skip the alpha weighting.
 fn resample_rgba<const OPAQUE: bool>(
-    src: &ImageRaster,
+    src: &dyn RowSource<[u8; 4]>,
     cols: &crate::resample::Taps,
     rows: &crate::resample::Taps,
     (c_lo, c_hi): (u32, u32),
     out: &mut [[u8; 4]],
     n: usize,
-) {
-    let mut line = vec![[0.0f32; 4]; (c_hi - c_lo + 1) as usize];
+) -> Result<()> {
+    let span = (c_hi - c_lo + 1) as usize;
+    let mut line = vec![[0.0f32; 4]; span];
+    let mut src_row = vec![[0u8; 4]; span];
     for j in 0..n {
         if !rows.inside[j] {
             continue;
         }
         line.fill([0.0; 4]);
         for &(r, wr) in rows.of(j) {
-            let src_row = &src.data[r as usize * src.width..][c_lo as usize..=c_hi as usize];
-            for (l, p) in line.iter_mut().zip(src_row) {
+            src.read_row(r as usize, c_lo as usize, &mut src_row)?;
+            for (l, p) in line.iter_mut().zip(&src_row) {
                 let a = if OPAQUE { wr } else { f32::from(p[3]) * wr };
                 l[0] += f32::from(p[0]) * a;
                 l[1] += f32::from(p[1]) * a;
@@ -366,6 +368,7 @@ fn resample_rgba<const OPAQUE: bool>(
             };
         }
     }
+    Ok(())
 }
 
 /// Decodes a tile file of `size` x `size` pixels to RGBA.

@@ -25,6 +25,7 @@ pub mod format;
 pub mod input;
 pub mod job;
 pub mod layer;
+pub mod lru;
 pub mod pyramid;
 pub mod raster;
 pub mod resample;

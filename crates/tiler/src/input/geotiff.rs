@@ -9,15 +9,138 @@ use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
 use crate::error::{Result, TilerError};
-use crate::raster::{Crs, ElevationRaster, Georef, ImageRaster, Raster, Registration};
+use crate::lru::Lru;
+use crate::raster::{Crs, ElevationRaster, Georef, Raster, Registration, RowSource};
 
 /// What a GeoTIFF holds.
-#[derive(Debug)]
 pub enum GeoTiff {
-    /// One band of numbers: elevation in metres, `NaN` where the file says no data.
+    /// One band of numbers with a nodata value, read whole so that its voids (`NaN`) can be
+    /// filled across the raster.
     Elevation(ElevationRaster),
-    /// 8-bit colour.
-    Image(ImageRaster),
+    /// One band of numbers without nodata, read strip by strip or tile by tile as needed.
+    ElevationStream(Box<dyn RowSource<f32>>),
+    /// 8-bit colour, read as needed.
+    Image {
+        /// The pixels.
+        source: Box<dyn RowSource<[u8; 4]>>,
+        /// Whether it has no alpha band.
+        opaque: bool,
+    },
+}
+
+/// Decoded chunks a streamed GeoTIFF keeps in memory by default, in bytes.
+pub const CHUNK_CACHE_BYTES: usize = 512 << 20;
+
+/// A GeoTIFF read a chunk (strip or tile) at a time, decoded chunks kept in an LRU cache.
+struct ChunkedSource<T> {
+    path: std::path::PathBuf,
+    file: std::fs::File,
+    layout: ChunkLayout,
+    georef: Georef,
+    convert: fn(&ChunkLayout, &[u8], &mut [T]),
+    cache: std::sync::Mutex<Lru<usize, Vec<T>>>,
+}
+
+impl<T: Copy + Default + Send + Sync> ChunkedSource<T> {
+    fn new(
+        path: &Path,
+        layout: ChunkLayout,
+        georef: Georef,
+        convert: fn(&ChunkLayout, &[u8], &mut [T]),
+    ) -> Result<Self> {
+        let chunk_bytes = layout.chunk_w * layout.chunk_h * std::mem::size_of::<T>();
+        Ok(Self {
+            path: path.to_owned(),
+            file: std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?,
+            cache: std::sync::Mutex::new(Lru::new(CHUNK_CACHE_BYTES / chunk_bytes.max(1))),
+            layout,
+            georef,
+            convert,
+        })
+    }
+
+    /// Chunk `i` decoded: `chunk_w` samples per row, its valid rows.
+    fn chunk(&self, i: usize) -> Result<std::sync::Arc<Vec<T>>> {
+        let poisoned = || TilerError::BadOptions("a worker panicked".into());
+        if let Some(c) = self.cache.lock().map_err(|_| poisoned())?.get(i) {
+            return Ok(c);
+        }
+        let mut raw = Vec::new();
+        self.layout
+            .read_chunk(&self.path, &self.file, i, &mut raw)?;
+        let (_, _, _, dh) = self.layout.placement(i);
+        let l = &self.layout;
+        let row_bytes = l.chunk_w * l.channels * l.bits / 8;
+        let mut out = vec![T::default(); l.chunk_w * dh];
+        for r in 0..dh {
+            (self.convert)(
+                l,
+                &raw[r * row_bytes..(r + 1) * row_bytes],
+                &mut out[r * l.chunk_w..(r + 1) * l.chunk_w],
+            );
+        }
+        let out = std::sync::Arc::new(out);
+        self.cache
+            .lock()
+            .map_err(|_| poisoned())?
+            .insert(i, out.clone());
+        Ok(out)
+    }
+}
+
+impl<T: Copy + Default + Send + Sync> RowSource<T> for ChunkedSource<T> {
+    fn width(&self) -> usize {
+        self.layout.width
+    }
+
+    fn height(&self) -> usize {
+        self.layout.height
+    }
+
+    fn georef(&self) -> &Georef {
+        &self.georef
+    }
+
+    fn read_row(&self, row: usize, c0: usize, out: &mut [T]) -> Result<()> {
+        let l = &self.layout;
+        let (cy, rr) = (row / l.chunk_h, row % l.chunk_h);
+        let mut done = 0;
+        while done < out.len() {
+            let c = c0 + done;
+            let (cx, cc) = (c / l.chunk_w, c % l.chunk_w);
+            let i = cy * l.across + cx;
+            let (_, _, dw, _) = l.placement(i);
+            let run = (dw - cc).min(out.len() - done);
+            let chunk = self.chunk(i)?;
+            out[done..done + run].copy_from_slice(&chunk[rr * l.chunk_w + cc..][..run]);
+            done += run;
+        }
+        Ok(())
+    }
+}
+
+fn heights_of(l: &ChunkLayout, raw: &[u8], out: &mut [f32]) {
+    let b = l.bits / 8;
+    for (o, v) in out.iter_mut().zip(raw.chunks_exact(b)) {
+        *o = l.value(v) as f32;
+    }
+}
+
+fn rgba_of(l: &ChunkLayout, raw: &[u8], out: &mut [[u8; 4]]) {
+    match l.channels {
+        1 => out
+            .iter_mut()
+            .zip(raw)
+            .for_each(|(o, &g)| *o = [g, g, g, 255]),
+        3 => out
+            .iter_mut()
+            .zip(raw.chunks_exact(3))
+            .for_each(|(o, p)| *o = [p[0], p[1], p[2], 255]),
+        _ => out
+            .iter_mut()
+            .zip(raw.chunks_exact(l.channels))
+            .for_each(|(o, p)| *o = [p[0], p[1], p[2], p[3]]),
+    }
 }
 
 // GeoKey IDs (GeoTIFF 1.1, section 7).
@@ -192,80 +315,54 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
         }
     };
     let layout = ChunkLayout::read(path, &mut dec, width, height)?;
-    let file = std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?;
     let c = layout.channels;
-    let mut bytes: Vec<u8> = Vec::new();
-    let mut heights: Vec<f32> = Vec::new();
-    match (layout.format, layout.bits) {
-        (SampleFormat::Uint, 8) => bytes = vec![0u8; width * height * c],
-        (SampleFormat::Uint | SampleFormat::Int, 16 | 32) | (SampleFormat::Float, 32 | 64)
-            if c == 1 =>
-        {
-            heights = vec![0.0f32; width * height];
+    match (layout.format, layout.bits, c) {
+        (SampleFormat::Uint, 8, 1 | 3 | 4) => {
+            return Ok(GeoTiff::Image {
+                source: Box::new(ChunkedSource::new(path, layout, georef, rgba_of)?),
+                opaque: c != 4,
+            });
         }
-        (f, b) => {
-            return Err(TilerError::bad_input(
-                path,
-                format!(
-                    "has {c} band(s) of {b}-bit {f:?} samples; expected one elevation band or 8-bit RGB/RGBA/grey"
-                ),
-            ));
+        (_, 16 | 32 | 64, 1) if nodata.is_none() => {
+            return Ok(GeoTiff::ElevationStream(Box::new(ChunkedSource::new(
+                path, layout, georef, heights_of,
+            )?)));
         }
+        _ => {}
     }
+    if c != 1 || !matches!(layout.bits, 16 | 32 | 64) {
+        return Err(TilerError::bad_input(
+            path,
+            format!(
+                "has {c} band(s) of {}-bit {:?} samples; expected one elevation band or 8-bit RGB/RGBA/grey",
+                layout.bits, layout.format
+            ),
+        ));
+    }
+    // Elevation with a nodata value: read whole, voids become NaN for filling.
+    let file = std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let mut heights = vec![0.0f32; width * height];
     let mut raw = Vec::new();
+    let mut line = Vec::new();
     for i in 0..layout.offsets.len() {
         layout.read_chunk(path, &file, i, &mut raw)?;
         let (x0, y0, dw, dh) = layout.placement(i);
-        let row_bytes = layout.chunk_w * c * layout.bits / 8;
+        let row_bytes = layout.chunk_w * layout.bits / 8;
+        line.resize(layout.chunk_w, 0.0f32);
         for r in 0..dh {
-            let src = &raw[r * row_bytes..][..dw * c * layout.bits / 8];
-            if bytes.is_empty() {
-                let dst = &mut heights[(y0 + r) * width + x0..][..dw];
-                let bits = layout.bits;
-                for (k, d) in dst.iter_mut().enumerate() {
-                    let v = &src[k * bits / 8..(k + 1) * bits / 8];
-                    *d = to_height(layout.value(v));
-                }
-            } else {
-                bytes[((y0 + r) * width + x0) * c..][..dw * c].copy_from_slice(src);
+            heights_of(&layout, &raw[r * row_bytes..(r + 1) * row_bytes], &mut line);
+            let dst = &mut heights[(y0 + r) * width + x0..][..dw];
+            for (d, &v) in dst.iter_mut().zip(&line) {
+                *d = to_height(f64::from(v));
             }
         }
     }
-    let image = |data: Vec<[u8; 4]>| {
-        GeoTiff::Image(Raster {
-            width,
-            height,
-            data,
-            georef,
-        })
-    };
-    Ok(match (bytes.is_empty(), c) {
-        (false, 3) => image(
-            bytes
-                .chunks_exact(3)
-                .map(|p| [p[0], p[1], p[2], 255])
-                .collect(),
-        ),
-        (false, 4) => image(
-            bytes
-                .chunks_exact(4)
-                .map(|p| [p[0], p[1], p[2], p[3]])
-                .collect(),
-        ),
-        (false, 1) => image(bytes.into_iter().map(|g| [g, g, g, 255]).collect()),
-        (true, _) => GeoTiff::Elevation(Raster {
-            width,
-            height,
-            data: heights,
-            georef,
-        }),
-        (false, n) => {
-            return Err(TilerError::bad_input(
-                path,
-                format!("has {n} 8-bit bands; expected RGB, RGBA or grey"),
-            ));
-        }
-    })
+    Ok(GeoTiff::Elevation(Raster {
+        width,
+        height,
+        data: heights,
+        georef,
+    }))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

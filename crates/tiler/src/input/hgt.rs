@@ -5,7 +5,6 @@
 
 use std::path::{Path, PathBuf};
 
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -13,6 +12,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::error::{Result, TilerError};
 use crate::fill::fill_voids;
+use crate::lru::Lru;
 use crate::raster::{Crs, Georef, Registration, RowSource};
 
 /// The void marker of SRTM files.
@@ -68,16 +68,13 @@ pub struct HgtMosaic {
     cols_deg: usize,
     rows_deg: usize,
     georef: Georef,
-    budget: usize,
     cache: Mutex<FileCache>,
     voids: AtomicUsize,
 }
 
-#[derive(Default)]
 struct FileCache {
-    files: FxHashMap<(i32, i32), Arc<Vec<f32>>>,
-    /// Least recently used first.
-    order: VecDeque<(i32, i32)>,
+    files: Lru<(i32, i32), Vec<f32>>,
+    /// Files whose voids are already counted.
     counted: FxHashSet<(i32, i32)>,
 }
 
@@ -169,8 +166,10 @@ impl HgtMosaic {
                 dy: step,
                 registration: Registration::Point,
             },
-            budget: budget.max(1),
-            cache: Mutex::new(FileCache::default()),
+            cache: Mutex::new(FileCache {
+                files: Lru::new(budget / (n * n * 4)),
+                counted: FxHashSet::default(),
+            }),
             voids: AtomicUsize::new(0),
         })
     }
@@ -183,11 +182,7 @@ impl HgtMosaic {
         let poisoned = || TilerError::BadOptions("a worker panicked".into());
         {
             let mut cache = self.cache.lock().map_err(|_| poisoned())?;
-            if let Some(data) = cache.files.get(&key).cloned() {
-                if let Some(pos) = cache.order.iter().position(|k| *k == key) {
-                    cache.order.remove(pos);
-                }
-                cache.order.push_back(key);
+            if let Some(data) = cache.files.get(key) {
                 return Ok(Some(data));
             }
         }
@@ -216,14 +211,7 @@ impl HgtMosaic {
         if cache.counted.insert(key) {
             self.voids.fetch_add(filled, Ordering::Relaxed);
         }
-        let file_bytes = self.n * self.n * 4;
-        while !cache.order.is_empty() && (cache.order.len() + 1) * file_bytes > self.budget {
-            if let Some(old) = cache.order.pop_front() {
-                cache.files.remove(&old);
-            }
-        }
         cache.files.insert(key, data.clone());
-        cache.order.push_back(key);
         Ok(Some(data))
     }
 }
