@@ -161,3 +161,46 @@ fn coarser_levels_follow_the_terrain() {
         "mean |error| {mean} m over {n} samples"
     );
 }
+
+#[test]
+fn greyscale_images_become_heights_with_the_given_scale() {
+    // earth-topology-2048x1024.png: 8-bit grey over the whole world, about 25 m per level.
+    let src = image::open(shared_data("earth-topology-2048x1024.png"))
+        .unwrap()
+        .into_luma8();
+    let out = fresh("tiler_elevation", "grey");
+    let mut j = job(
+        JobKind::Dem {
+            encoding: ElevationEncoding::Terrarium,
+            height_scale: Some(25.1),
+        },
+        &[shared_data("earth-topology-2048x1024.png")],
+        &out,
+        TilingScheme::Geographic,
+    );
+    j.max_level = Some(2);
+    globus_tiler::run(&j).unwrap();
+    // At level 2 (45-degree tiles, 256 samples) the source has 1.1 pixels per sample: each
+    // sample is the area mean of the pixels under it. Check the brightest place (the
+    // Himalaya or the Andes) reads back as a high mountain and the oceans as 0 m.
+    let (mut best, mut at) = (0u8, (0u32, 0u32));
+    for (x, y, p) in src.enumerate_pixels() {
+        if p[0] > best {
+            best = p[0];
+            at = (x, y);
+        }
+    }
+    let lon = (f64::from(at.0) + 0.5) / 2048.0 * 360.0 - 180.0;
+    let lat = 90.0 - (f64::from(at.1) + 0.5) / 1024.0 * 180.0;
+    let (x, y) = (((lon + 180.0) / 45.0) as u32, ((90.0 - lat) / 45.0) as u32);
+    let h = heights(&out, 2, x, y, ElevationEncoding::Terrarium);
+    let top = h.iter().copied().fold(f64::MIN, f64::max);
+    let expected = f64::from(best) * 25.1;
+    assert!(
+        top > 0.7 * expected && top <= expected + 1.0,
+        "highest {top} m, brightest pixel {expected} m"
+    );
+    // Mid-Pacific (150 W, 0 N) is ocean: 0 m.
+    let pacific = heights(&out, 2, 0, 1, ElevationEncoding::Terrarium);
+    assert!(pacific[255 * 256 + 128].abs() < 0.01);
+}

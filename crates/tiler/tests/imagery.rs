@@ -267,3 +267,26 @@ fn resume_completes_an_interrupted_run_with_the_same_tiles() {
         assert!(resumed[k] == *v, "{k} differs after resuming");
     }
 }
+
+#[test]
+fn webp_and_tms_outputs_hold_the_same_pixels() {
+    let png_dir = fresh("tiler_imagery", "fmt-png");
+    let webp_dir = fresh("tiler_imagery", "fmt-webp-tms");
+    let mut j = job(png(), &bmng(), &png_dir, TilingScheme::Geographic);
+    j.max_level = Some(2);
+    globus_tiler::run(&j).unwrap();
+    j.output = webp_dir.clone();
+    j.kind = JobKind::Imagery {
+        format: ImageFormat::Webp,
+    };
+    j.layout = globus_tiler::TileLayout::Tms;
+    globus_tiler::run(&j).unwrap();
+    // Level 2 has 4 rows: XYZ row 1 is TMS row 2. Both formats are lossless.
+    let a = decode_rgba(&png_dir.join("2/3/1.png"));
+    let b = decode_rgba(&webp_dir.join("2/3/2.webp"));
+    assert!(a == b, "WebP tile differs from the PNG tile");
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(webp_dir.join("metadata.json")).unwrap()).unwrap();
+    assert_eq!(meta["layout"], "tms");
+    assert_eq!(meta["format"], "webp");
+}
