@@ -122,9 +122,9 @@ struct BenchArgs {
 
 #[derive(Subcommand)]
 enum TileCommand {
-    /// Elevation: SRTM .hgt or greyscale images to RGB-encoded PNG tiles.
+    /// Elevation: SRTM .hgt, GeoTIFF DEMs or greyscale images to RGB-encoded PNG tiles.
     Dem(TileArgs),
-    /// Imagery: a JPEG/PNG world image to JPEG, PNG or WebP tiles.
+    /// Imagery: a GeoTIFF or a JPEG/PNG world image to JPEG, PNG or WebP tiles.
     Imagery(TileArgs),
     /// Split a job into shards of roughly equal work and print the plan as JSON.
     Plan {

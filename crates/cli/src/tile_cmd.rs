@@ -11,8 +11,8 @@ use globus_tiling::{GeoRect, TilingScheme};
 /// Options shared by `globus tile dem` and `globus tile imagery`.
 #[derive(Args, Clone, Debug)]
 pub struct TileArgs {
-    /// Input files: SRTM .hgt (several form a mosaic), or one JPEG/PNG image in
-    /// equirectangular projection covering --bounds.
+    /// Input files: SRTM .hgt (several form a mosaic), one GeoTIFF (EPSG:4326 or 3857), or
+    /// one JPEG/PNG image in equirectangular projection covering --bounds.
     #[arg(long = "in", required = true, num_args = 1..)]
     pub inputs: Vec<PathBuf>,
     /// Output: a directory ({z}/{x}/{y}.ext), FILE.mbtiles or FILE.pmtiles.
