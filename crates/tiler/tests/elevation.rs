@@ -130,32 +130,14 @@ fn neighbouring_tiles_share_edge_heights_exactly_at_every_level() {
 
 #[test]
 fn coarser_levels_follow_the_terrain() {
-    let hgt = Hgt::load();
     let enc = ElevationEncoding::Terrarium;
     let scheme = TilingScheme::Geographic;
     let out = fresh("tiler_elevation", "coarse");
     let s = globus_tiler::run(&job(dem(enc), &[shared_data("N57E011.hgt")], &out, scheme)).unwrap();
     // Two levels up, samples are 4 source samples apart: smoothed, but still the terrain.
     let z = s.levels.1 - 2;
-    let (nx, ny) = (scheme.tiles_x(z) as f64, scheme.tiles_y(z) as f64);
-    let (mut sum, mut n) = (0.0, 0);
-    for (key, _) in read_tree(&out.join(z.to_string())) {
-        let (x, y) = key.trim_end_matches(".png").split_once('/').unwrap();
-        let (x, y): (u32, u32) = (x.parse().unwrap(), y.parse().unwrap());
-        let h = heights(&out, z, x, y, enc);
-        for j in 0..256 {
-            let lat = corner_lat(scheme, y, j, 256, ny);
-            for i in 0..256 {
-                let lon = corner_lon(x, i, 256, nx);
-                // Away from the footprint's edge, where outside zeros blend in.
-                if (11.02..=11.98).contains(&lon) && (57.02..=57.98).contains(&lat) {
-                    sum += (h[j * 256 + i] - hgt.height(lon, lat)).abs();
-                    n += 1;
-                }
-            }
-        }
-    }
-    let mean = sum / f64::from(n);
+    // Away from the footprint's edge, where outside zeros blend in.
+    let (mean, n) = mean_error_against_hgt(&out, scheme, z, enc, 1, 0.02);
     assert!(
         n > 10_000 && mean < 4.0,
         "mean |error| {mean} m over {n} samples"

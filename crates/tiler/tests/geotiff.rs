@@ -113,7 +113,6 @@ fn srtm_as_geotiff_gives_the_same_tiles_as_the_hgt_file() {
 
 #[test]
 fn web_mercator_geotiff_is_read_in_its_own_crs() {
-    let hgt = Hgt::load();
     let warped = gdal(
         "gdalwarp",
         &[
@@ -131,27 +130,8 @@ fn web_mercator_geotiff_is_read_in_its_own_crs() {
         (TilingScheme::Geographic, 10),
     ] {
         let (s, out) = tiles_of(&warped, dem(), scheme, max, &format!("from-3857-{scheme}"));
-        let z = s.levels.1;
-        let (nx, ny) = (scheme.tiles_x(z) as f64, scheme.tiles_y(z) as f64);
-        let (mut sum, mut n) = (0.0, 0u32);
-        for (name, _) in read_tree(&out.join(z.to_string())) {
-            let (x, y) = name.trim_end_matches(".png").split_once('/').unwrap();
-            let (x, y): (u32, u32) = (x.parse().unwrap(), y.parse().unwrap());
-            let img = decode_rgba(&out.join(format!("{z}/{name}")));
-            for j in (0..256).step_by(5) {
-                let lat = corner_lat(scheme, y, j, 256, ny);
-                for i in (0..256).step_by(5) {
-                    let lon = corner_lon(x, i, 256, nx);
-                    if (11.01..=11.99).contains(&lon) && (57.01..=57.99).contains(&lat) {
-                        let p = img.get_pixel(i as u32, j as u32);
-                        let h = ElevationEncoding::Mapbox.decode([p[0], p[1], p[2]]);
-                        sum += (h - hgt.height(lon, lat)).abs();
-                        n += 1;
-                    }
-                }
-            }
-        }
-        let mean = sum / f64::from(n);
+        let (mean, n) =
+            mean_error_against_hgt(&out, scheme, s.levels.1, ElevationEncoding::Mapbox, 5, 0.01);
         assert!(
             n > 5000 && mean < 2.0,
             "{scheme}: mean |error| {mean} m over {n} samples"

@@ -109,3 +109,39 @@ pub fn corner_lat(scheme: TilingScheme, y: u32, j: usize, n: usize, ny: f64) -> 
             .to_degrees(),
     }
 }
+
+/// The mean absolute difference between the level-`z` tiles of an elevation pyramid (XYZ
+/// directory, 256-sample corner grids, encoding `enc`) and the SRTM file, over every
+/// `step`-th sample inside 11..12 E, 57..58 N shrunk by `margin` degrees; and the number of
+/// samples compared.
+pub fn mean_error_against_hgt(
+    dir: &Path,
+    scheme: TilingScheme,
+    z: u8,
+    enc: globus_tiler::ElevationEncoding,
+    step: usize,
+    margin: f64,
+) -> (f64, u32) {
+    let hgt = Hgt::load();
+    let (nx, ny) = (scheme.tiles_x(z) as f64, scheme.tiles_y(z) as f64);
+    let (mut sum, mut n) = (0.0, 0u32);
+    for (name, _) in read_tree(&dir.join(z.to_string())) {
+        let (x, y) = name.trim_end_matches(".png").split_once('/').unwrap();
+        let (x, y): (u32, u32) = (x.parse().unwrap(), y.parse().unwrap());
+        let img = decode_rgba(&dir.join(format!("{z}/{name}")));
+        for j in (0..256).step_by(step) {
+            let lat = corner_lat(scheme, y, j, 256, ny);
+            for i in (0..256).step_by(step) {
+                let lon = corner_lon(x, i, 256, nx);
+                if (11.0 + margin..=12.0 - margin).contains(&lon)
+                    && (57.0 + margin..=58.0 - margin).contains(&lat)
+                {
+                    let p = img.get_pixel(i as u32, j as u32);
+                    sum += (enc.decode([p[0], p[1], p[2]]) - hgt.height(lon, lat)).abs();
+                    n += 1;
+                }
+            }
+        }
+    }
+    (sum / f64::from(n.max(1)), n)
+}
