@@ -103,138 +103,67 @@ fn geo_tile_names_a_tile_like_bing_and_tms() {
 
 #[test]
 fn bad_arguments_end_with_one_clear_line() {
-    fails_with_one_line(
-        &[
-            "geo", "tile", "--scheme", "utm", "--lon", "0", "--lat", "0", "--level", "1",
-        ],
-        "unknown tiling scheme",
-    );
-    fails_with_one_line(
-        &[
-            "geo",
-            "tile",
-            "--scheme",
-            "webmercator",
-            "--lon",
-            "0",
-            "--lat",
-            "89",
-            "--level",
-            "1",
-        ],
-        "outside",
-    );
-    fails_with_one_line(&["geo", "ecef", "200", "0", "0"], "longitude 200");
-    fails_with_one_line(
-        &["geo", "cartographic", "0", "0", "0"],
-        "centre of the Earth",
-    );
-    fails_with_one_line(&["geo", "ecef", "1", "2"], "globus");
     let png = std::env::temp_dir().join("globus-cli-test.png");
     let png = png.to_str().unwrap();
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,95,1000,0,0",
+    // Arguments split on spaces (OUT stands for a writable PNG path); the text the one error
+    // line must contain.
+    let cases = [
+        (
+            "geo tile --scheme utm --lon 0 --lat 0 --level 1",
+            "unknown tiling scheme",
+        ),
+        (
+            "geo tile --scheme webmercator --lon 0 --lat 89 --level 1",
+            "outside",
+        ),
+        ("geo ecef 200 0 0", "longitude 200"),
+        ("geo cartographic 0 0 0", "centre of the Earth"),
+        ("geo ecef 1 2", "globus"),
+        (
+            "render --camera 0,95,1000,0,0 --size 64x64 --out OUT",
+            "latitude 95",
+        ),
+        (
+            "render --camera 0,0,1000,0 --size 64x64 --out OUT",
+            "5 numbers",
+        ),
+        (
+            "render --camera 0,0,1000,0,-120 --size 64x64 --out OUT",
+            "pitch",
+        ),
+        (
+            "render --camera 0,0,abc,0,0 --size 64x64 --out OUT",
+            "ALT_M",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64by64 --out OUT",
             "--size",
-            "64x64",
-            "--out",
-            png,
-        ],
-        "latitude 95",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 0x64 --out OUT",
             "--size",
-            "64x64",
-            "--out",
-            png,
-        ],
-        "5 numbers",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0,-120",
-            "--size",
-            "64x64",
-            "--out",
-            png,
-        ],
-        "pitch",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,abc,0,0",
-            "--size",
-            "64x64",
-            "--out",
-            png,
-        ],
-        "ALT_M",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0,0",
-            "--size",
-            "64by64",
-            "--out",
-            png,
-        ],
-        "--size",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0,0",
-            "--size",
-            "0x64",
-            "--out",
-            png,
-        ],
-        "--size",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0,0",
-            "--size",
-            "64x64",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --sse 0 --out OUT",
             "--sse",
-            "0",
-            "--out",
-            png,
-        ],
-        "--sse",
-    );
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1000,0,0",
-            "--size",
-            "64x64",
-            "--out",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out /nonexistent-dir/x.png",
             "/nonexistent-dir/x.png",
-        ],
-        "/nonexistent-dir/x.png",
-    );
-    fails_with_one_line(
-        &["bench", "--path", "/nonexistent/path.json"],
-        "/nonexistent/path.json",
-    );
-    fails_with_one_line(&["frobnicate"], "frobnicate");
+        ),
+        (
+            "bench --path /nonexistent/path.json",
+            "/nonexistent/path.json",
+        ),
+        ("frobnicate", "frobnicate"),
+    ];
+    for (args, needle) in cases {
+        let args: Vec<&str> = args
+            .split(' ')
+            .map(|a| if a == "OUT" { png } else { a })
+            .collect();
+        fails_with_one_line(&args, needle);
+    }
 }
 
 #[test]

@@ -198,10 +198,7 @@ impl Layer for ElevationLayer {
         let mut out = vec![OUTSIDE_HEIGHT_M; n * n];
         // Separable: a vertical pass over the source columns the tile touches, then the
         // horizontal taps over that line.
-        let (c_lo, c_hi) = cols
-            .taps
-            .iter()
-            .fold((u32::MAX, 0), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
+        let (c_lo, c_hi) = cols.span();
         let span = (c_hi - c_lo + 1) as usize;
         let mut line = vec![0.0f32; span];
         let mut src_row = vec![0.0f32; span];
@@ -303,10 +300,7 @@ impl Layer for ImageryLayer {
         let mut out = vec![[0u8; 4]; n * n];
         // Separable: a vertical pass into premultiplied RGBA over the source columns the tile
         // touches, then the horizontal taps over that line.
-        let (c_lo, c_hi) = cols
-            .taps
-            .iter()
-            .fold((u32::MAX, 0), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)));
+        let (c_lo, c_hi) = cols.span();
         if self.opaque {
             resample_rgba::<true>(src, &cols, &rows, (c_lo, c_hi), &mut out, n)?;
         } else {

@@ -86,6 +86,13 @@ impl Taps {
         &self.taps[self.start[i] as usize..self.start[i + 1] as usize]
     }
 
+    /// The first and last source index any output sample uses.
+    pub fn span(&self) -> (u32, u32) {
+        self.taps
+            .iter()
+            .fold((u32::MAX, 0), |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)))
+    }
+
     /// Taps for output samples at fractional source positions `pos` (source sample centres at
     /// whole numbers) over `len` source samples. `inside[i]` says whether sample `i` is in the
     /// footprint.
