@@ -3,6 +3,7 @@
 
 pub mod engine;
 pub mod geo_cmd;
+pub mod mesh_cmd;
 pub mod offscreen;
 pub mod path;
 pub mod tile_cmd;

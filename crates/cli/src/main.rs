@@ -7,6 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use globus_app::engine::{CameraSpec, GlobeOptions};
 use globus_app::geo_cmd;
+use globus_app::mesh_cmd::{self, MeshArgs};
 use globus_app::offscreen::{Offscreen, save_png};
 use globus_app::path::CameraPath;
 use globus_app::tile_cmd::{self, MergeArgs, TileArgs};
@@ -37,6 +38,8 @@ enum Command {
         #[command(subcommand)]
         command: TileCommand,
     },
+    /// Build one tile's adaptive mesh from an elevation PNG, or describe a quantized-mesh file.
+    Mesh(MeshArgs),
     /// Geodesy and tile naming conversions.
     Geo {
         #[command(subcommand)]
@@ -222,6 +225,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 TileCommand::Merge(a) => tile_cmd::merge(&a)?,
             };
             println!("{line}");
+            Ok(())
+        }
+        Command::Mesh(args) => {
+            let report = mesh_cmd::run(&args)?;
+            if args.json {
+                println!("{report}");
+            } else {
+                println!("{}", mesh_cmd::summary_line(&report));
+            }
             Ok(())
         }
         Command::Geo { command } => {

@@ -92,7 +92,7 @@ fn parse_bounds(text: &str) -> anyhow::Result<GeoRect> {
     Ok(GeoRect::from_degrees(v[0], v[1], v[2], v[3]))
 }
 
-fn parse_scheme(name: &str) -> anyhow::Result<TilingScheme> {
+pub(crate) fn parse_scheme(name: &str) -> anyhow::Result<TilingScheme> {
     match name {
         "geographic" | "EPSG:4326" => Ok(TilingScheme::Geographic),
         "webmercator" | "mercator" | "EPSG:3857" => Ok(TilingScheme::WebMercator),

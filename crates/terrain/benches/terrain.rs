@@ -43,7 +43,7 @@ fn noise_throughput(c: &mut Criterion) {
     });
 }
 criterion_group!(more, noise_throughput);
-criterion_main!(benches, more, tilegen);
+criterion_main!(benches, more, tilegen, adaptive);
 
 fn tiles(c: &mut Criterion) {
     use globus_terrain::{ProceduralPlanet, TileMesh};
@@ -70,3 +70,30 @@ fn tiles(c: &mut Criterion) {
     });
 }
 criterion_group!(tilegen, tiles);
+
+/// RTIN and the decimator on a 257 x 257 ridged grid (the full comparison with martini and
+/// delatin on 513 x 513 real data is `tools/compare-meshers.py`).
+fn adaptive_meshes(c: &mut Criterion) {
+    use globus_terrain::adaptive::{HeightGrid, Rtin, decimate};
+    let side = 257;
+    let h = (0..side * side)
+        .map(|i| {
+            let (x, y) = ((i % side) as f32 / 40.0, (i / side) as f32 / 40.0);
+            1500.0 * (1.0 - (x.sin() * y.cos()).abs()) + 60.0 * (x * 7.1 + y * 3.3).sin()
+        })
+        .collect();
+    let Ok(grid) = HeightGrid::new(side, h) else {
+        return;
+    };
+    c.bench_function("rtin 257 errors", |b| {
+        b.iter(|| black_box(Rtin::new(&grid)))
+    });
+    let rtin = Rtin::new(&grid);
+    c.bench_function("rtin 257 mesh 5 m", |b| {
+        b.iter(|| black_box(rtin.mesh(5.0)))
+    });
+    c.bench_function("decimate 257 5 m", |b| {
+        b.iter(|| black_box(decimate::decimate(&grid, 5.0)))
+    });
+}
+criterion_group!(adaptive, adaptive_meshes);

@@ -6,13 +6,20 @@
 //! * [`TileMesh`]: the tile's vertices relative to its own origin (f32) plus normals, skirts
 //!   and exact bounds, ready to upload.
 //! * [`grid`]: the vertex layout and triangulation every tile shares.
+//! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and greedy Delaunay plus
+//!   Kaiser's plane-deviance decimation).
+//! * [`quantized_mesh`]: Cesium's quantized-mesh-1.0, encoded and decoded (untrusted input).
+//! * [`encoding`]: elevation as RGB (Terrarium, Mapbox Terrain-RGB, Kaiser's centimetres).
 
+pub mod adaptive;
 pub mod biome;
+pub mod encoding;
 mod generate;
 pub mod grid;
 mod mesh;
 pub mod noise;
 mod planet;
+pub mod quantized_mesh;
 mod tile;
 
 pub use mesh::{TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};

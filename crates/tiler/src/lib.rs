@@ -18,7 +18,7 @@
 //! sources are filled by push-pull interpolation ([`fill`]); outside the data's footprint
 //! elevation is 0 m and imagery is transparent.
 
-pub mod encoding;
+pub use globus_terrain::encoding;
 pub mod error;
 pub mod fill;
 pub mod format;

@@ -1,0 +1,264 @@
+//! Kaiser's plane-deviance vertex removal (Kaiser 2018, Algorithm 1) with an exact error
+//! check on every re-triangulated hole.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use super::{DecimateOptions, orient, scan_triangle};
+use crate::adaptive::HeightGrid;
+
+/// Removes interior vertices while the bound holds; returns the surviving triangles.
+pub(super) fn remove_vertices(
+    grid: &HeightGrid,
+    points: &[[u16; 2]],
+    triangles: Vec<[u32; 3]>,
+    options: &DecimateOptions,
+) -> Vec<[u32; 3]> {
+    let mut m = Soup {
+        grid,
+        points,
+        tris: triangles,
+        alive: Vec::new(),
+        fans: vec![Vec::new(); points.len()],
+        limit: options.max_error as f32,
+    };
+    m.alive = vec![true; m.tris.len()];
+    for (t, tri) in m.tris.iter().enumerate() {
+        for &v in tri {
+            m.fans[v as usize].push(t as u32);
+        }
+    }
+    let n = (grid.side() - 1) as u16;
+    let interior = |v: u32| {
+        let [x, y] = points[v as usize];
+        x != 0 && y != 0 && x != n && y != n
+    };
+    let mut version = vec![0u32; points.len()];
+    let mut queue = BinaryHeap::new();
+    for v in 0..points.len() as u32 {
+        if interior(v) && !m.fans[v as usize].is_empty() {
+            queue.push(Candidate {
+                deviance: m.plane_deviance(v),
+                vertex: v,
+                version: 0,
+            });
+        }
+    }
+    while let Some(c) = queue.pop() {
+        if version[c.vertex as usize] != c.version || m.fans[c.vertex as usize].is_empty() {
+            continue;
+        }
+        let Some(ring) = m.ring(c.vertex) else {
+            continue;
+        };
+        if ring.len() > options.max_neighbours {
+            continue;
+        }
+        if let Some(max_area) = options.max_triangle_area
+            && m.fans[c.vertex as usize].iter().any(|&t| {
+                let [a, b, d] = m.tris[t as usize].map(|v| points[v as usize]);
+                orient(a, b, d).abs() as f64 / 2.0 > max_area
+            })
+        {
+            continue;
+        }
+        if !m.try_remove(c.vertex, &ring) {
+            continue;
+        }
+        for &r in &ring {
+            if interior(r) {
+                version[r as usize] += 1;
+                queue.push(Candidate {
+                    deviance: m.plane_deviance(r),
+                    vertex: r,
+                    version: version[r as usize],
+                });
+            }
+        }
+    }
+    m.tris
+        .iter()
+        .zip(&m.alive)
+        .filter(|(_, alive)| **alive)
+        .map(|(t, _)| *t)
+        .collect()
+}
+
+/// Smallest deviance first.
+#[derive(PartialEq)]
+struct Candidate {
+    deviance: f64,
+    vertex: u32,
+    version: u32,
+}
+
+impl Eq for Candidate {}
+
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Candidate {
+    fn cmp(&self, other: &Self) -> Ordering {
+        other
+            .deviance
+            .total_cmp(&self.deviance)
+            .then_with(|| other.vertex.cmp(&self.vertex))
+    }
+}
+
+struct Soup<'a> {
+    grid: &'a HeightGrid,
+    points: &'a [[u16; 2]],
+    tris: Vec<[u32; 3]>,
+    alive: Vec<bool>,
+    /// Per vertex, its live triangles.
+    fans: Vec<Vec<u32>>,
+    limit: f32,
+}
+
+impl Soup<'_> {
+    fn position(&self, v: u32) -> [f64; 3] {
+        let [x, y] = self.points[v as usize];
+        [
+            f64::from(x),
+            f64::from(y),
+            f64::from(self.grid.at(usize::from(x), usize::from(y))),
+        ]
+    }
+
+    /// Distance of `v` from the area-weighted average plane of its fan (Kaiser's eq. for P
+    /// and n: area-weighted triangle centres and normals).
+    fn plane_deviance(&self, v: u32) -> f64 {
+        let mut centre = [0.0; 3];
+        let mut normal = [0.0; 3];
+        let mut total = 0.0;
+        for &t in &self.fans[v as usize] {
+            let [a, b, c] = self.tris[t as usize].map(|i| self.position(i));
+            let n = cross(sub(b, a), sub(c, a));
+            let area = len(n) / 2.0;
+            if area == 0.0 {
+                continue;
+            }
+            for k in 0..3 {
+                centre[k] += area * (a[k] + b[k] + c[k]) / 3.0;
+                // n / |n| * area = n / 2.
+                normal[k] += n[k] / 2.0;
+            }
+            total += area;
+        }
+        if total == 0.0 || len(normal) == 0.0 {
+            return 0.0;
+        }
+        let centre = centre.map(|c| c / total);
+        let l = len(normal);
+        let normal = normal.map(|c| c / l);
+        dot(normal, sub(self.position(v), centre)).abs()
+    }
+
+    /// The ring of neighbours around interior vertex `v`, in the triangles' winding order;
+    /// `None` if the fan is not a closed disc.
+    fn ring(&self, v: u32) -> Option<Vec<u32>> {
+        let fan = &self.fans[v as usize];
+        let mut edges: Vec<(u32, u32)> = Vec::with_capacity(fan.len());
+        for &t in fan {
+            let tri = self.tris[t as usize];
+            let k = tri.iter().position(|&x| x == v)?;
+            edges.push((tri[(k + 1) % 3], tri[(k + 2) % 3]));
+        }
+        let mut ring = Vec::with_capacity(edges.len());
+        let mut at = edges[0].0;
+        for _ in 0..edges.len() {
+            ring.push(at);
+            at = edges.iter().find(|e| e.0 == at)?.1;
+        }
+        (at == edges[0].0).then_some(ring)
+    }
+
+    /// Removes `v` and fills the hole by ear clipping (the ear with the smallest error first);
+    /// keeps the change only if every new triangle is within the bound.
+    fn try_remove(&mut self, v: u32, ring: &[u32]) -> bool {
+        let mut poly = ring.to_vec();
+        let mut new_tris = Vec::with_capacity(ring.len() - 2);
+        while poly.len() > 3 {
+            let k = poly.len();
+            let mut best: Option<(f32, usize)> = None;
+            for i in 0..k {
+                let (a, b, c) = (poly[(i + k - 1) % k], poly[i], poly[(i + 1) % k]);
+                if !self.is_ear(&poly, a, b, c) {
+                    continue;
+                }
+                let (err, _) = scan_triangle(self.grid, [a, b, c].map(|x| self.points[x as usize]));
+                if err <= self.limit && best.is_none_or(|(e, _)| err < e) {
+                    best = Some((err, i));
+                }
+            }
+            let Some((_, i)) = best else {
+                return false;
+            };
+            new_tris.push([poly[(i + k - 1) % k], poly[i], poly[(i + 1) % k]]);
+            poly.remove(i);
+        }
+        let last = [poly[0], poly[1], poly[2]];
+        let p = last.map(|x| self.points[x as usize]);
+        if orient(p[0], p[1], p[2]) >= 0 || scan_triangle(self.grid, p).0 > self.limit {
+            return false;
+        }
+        new_tris.push(last);
+        for t in std::mem::take(&mut self.fans[v as usize]) {
+            self.alive[t as usize] = false;
+            for &r in &self.tris[t as usize] {
+                if r != v {
+                    self.fans[r as usize].retain(|&x| x != t);
+                }
+            }
+        }
+        for tri in new_tris {
+            let t = self.tris.len() as u32;
+            self.tris.push(tri);
+            self.alive.push(true);
+            for r in tri {
+                self.fans[r as usize].push(t);
+            }
+        }
+        true
+    }
+
+    /// Whether (a, b, c) is a proper ear of `poly`: wound like the mesh and with no other
+    /// polygon vertex inside or on it.
+    fn is_ear(&self, poly: &[u32], a: u32, b: u32, c: u32) -> bool {
+        let p = |x: u32| self.points[x as usize];
+        if orient(p(a), p(b), p(c)) >= 0 {
+            return false;
+        }
+        poly.iter()
+            .filter(|&&x| x != a && x != b && x != c)
+            .all(|&x| {
+                let q = p(x);
+                // Outside if strictly on the outer side of any edge (mesh winding is negative).
+                orient(p(a), p(b), q) > 0 || orient(p(b), p(c), q) > 0 || orient(p(c), p(a), q) > 0
+            })
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn len(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
