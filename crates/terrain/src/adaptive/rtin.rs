@@ -233,25 +233,36 @@ fn level<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
     squares_pass::<S>(scan, s, errors);
 }
 
-/// Computes `value(x, y)` for every `x` in `xs` on every row `y` in `ys`, rows in parallel
-/// (they only read `errors`), then stores each at `errors[index(x, y)]`.
+/// Computes `value(errors, x, y)` for `x = x0 + i * step` (`i < cols`) on every row
+/// `y = y0 + j * step` (`j < rows`), rows in parallel (they only read `errors`) into one flat
+/// buffer, then stores each at `errors[index(x, y)]`.
+#[allow(clippy::too_many_arguments)] // one call per pass; a struct would only rename them
 #[inline(always)]
 fn each_row(
     errors: &mut [f32],
-    ys: std::iter::StepBy<std::ops::RangeInclusive<usize>>,
-    xs: std::iter::StepBy<std::ops::RangeInclusive<usize>>,
+    (y0, rows): (usize, usize),
+    (x0, cols): (usize, usize),
+    step: usize,
     value: impl Fn(&[f32], usize, usize) -> f32 + Sync,
     index: impl Fn(usize, usize) -> usize,
 ) {
-    let ys: Vec<usize> = ys.collect();
+    let mut out = vec![0.0f32; rows * cols];
     let read: &[f32] = errors;
-    let rows: Vec<Vec<f32>> = ys
-        .par_iter()
-        .map(|&y| xs.clone().map(|x| value(read, x, y)).collect())
-        .collect();
-    for (&y, row) in ys.iter().zip(&rows) {
-        for (x, &e) in xs.clone().zip(row) {
-            errors[index(x, y)] = e;
+    // Tasks of at least ~64k grid samples (a value scans about step^2 of them): below that,
+    // scheduling costs more than the work.
+    let min_rows = (65536 / (cols * step * step).max(1)).max(1);
+    out.par_chunks_mut(cols)
+        .with_min_len(min_rows)
+        .enumerate()
+        .for_each(|(j, row)| {
+            let y = y0 + j * step;
+            for (i, e) in row.iter_mut().enumerate() {
+                *e = value(read, x0 + i * step, y);
+            }
+        });
+    for (j, row) in out.chunks_exact(cols).enumerate() {
+        for (i, &e) in row.iter().enumerate() {
+            errors[index(x0 + i * step, y0 + j * step)] = e;
         }
     }
 }
@@ -271,23 +282,16 @@ fn sides_pass<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
         let horizontal = |_: &[f32], x: usize, y: usize| {
             (h[at(x + 1, y)] - (h[at(x, y)] + h[at(x + 2, y)]) * 0.5).abs()
         };
-        each_row(
-            errors,
-            (0..=n).step_by(2),
-            (0..=n - 2).step_by(2),
-            horizontal,
-            |x, y| at(x + 1, y),
-        );
+        let (edges, cells) = (n / 2 + 1, n / 2);
+        each_row(errors, (0, edges), (0, cells), 2, horizontal, |x, y| {
+            at(x + 1, y)
+        });
         let vertical = |_: &[f32], x: usize, y: usize| {
             (h[at(x, y + 1)] - (h[at(x, y)] + h[at(x, y + 2)]) * 0.5).abs()
         };
-        each_row(
-            errors,
-            (0..=n - 2).step_by(2),
-            (0..=n).step_by(2),
-            vertical,
-            |x, y| at(x, y + 1),
-        );
+        each_row(errors, (0, cells), (0, edges), 2, vertical, |x, y| {
+            at(x, y + 1)
+        });
         return;
     }
     // Horizontal sides on the grid, vertical sides as horizontal sides of the transpose.
@@ -317,13 +321,7 @@ fn sides_pass<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
                 at(x + half, y)
             }
         };
-        each_row(
-            errors,
-            (0..=n).step_by(s),
-            (0..=n - s).step_by(s),
-            value,
-            index,
-        );
+        each_row(errors, (0, n / s + 1), (0, n / s), s, value, index);
     }
 }
 
@@ -361,13 +359,9 @@ fn squares_pass<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
         }
         e
     };
-    each_row(
-        errors,
-        (0..=n - s).step_by(s),
-        (0..=n - s).step_by(s),
-        value,
-        |x, y| at(x + half, y + half),
-    );
+    each_row(errors, (0, n / s), (0, n / s), s, value, |x, y| {
+        at(x + half, y + half)
+    });
 }
 
 /// max |row[k] - (start + step * k)|, in lanes the compiler vectorises (compare-and-select
