@@ -112,14 +112,7 @@ impl TileMesh {
 /// Oct-encodes a unit vector (Cigolle et al., "A Survey of Efficient Representations for
 /// Independent Unit Vectors", JCGT 2014) into two snorm16 values packed in a `u32`.
 pub fn encode_oct_normal(n: DVec3) -> u32 {
-    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
-    if l1 == 0.0 {
-        return 0;
-    }
-    let mut p = DVec2::new(n.x, n.y) / l1;
-    if n.z < 0.0 {
-        p = (DVec2::ONE - DVec2::new(p.y.abs(), p.x.abs())) * DVec2::new(sign(p.x), sign(p.y));
-    }
+    let p = oct_project(n);
     let q = |v: f64| ((v.clamp(-1.0, 1.0) * 32767.0).round() as i16) as u16;
     u32::from(q(p.x)) | (u32::from(q(p.y)) << 16)
 }
@@ -127,11 +120,30 @@ pub fn encode_oct_normal(n: DVec3) -> u32 {
 /// Inverse of [`encode_oct_normal`] (the shader does the same).
 pub fn decode_oct_normal(packed: u32) -> DVec3 {
     let f = |bits: u16| (f64::from(bits as i16) / 32767.0).max(-1.0);
-    let (x, y) = (f(packed as u16), f((packed >> 16) as u16));
-    let z = 1.0 - x.abs() - y.abs();
+    oct_unproject(DVec2::new(f(packed as u16), f((packed >> 16) as u16)))
+}
+
+/// A unit vector projected onto the octahedron and unfolded into the square [-1, 1]^2
+/// (the part every oct encoding shares; only the quantisation differs).
+pub(crate) fn oct_project(n: DVec3) -> DVec2 {
+    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
+    if l1 == 0.0 {
+        return DVec2::ZERO;
+    }
+    let p = DVec2::new(n.x, n.y) / l1;
+    if n.z < 0.0 {
+        (DVec2::ONE - DVec2::new(p.y.abs(), p.x.abs())) * DVec2::new(sign(p.x), sign(p.y))
+    } else {
+        p
+    }
+}
+
+/// Inverse of [`oct_project`].
+pub(crate) fn oct_unproject(p: DVec2) -> DVec3 {
+    let z = 1.0 - p.x.abs() - p.y.abs();
     let t = (-z).max(0.0);
-    let x = x + if x >= 0.0 { -t } else { t };
-    let y = y + if y >= 0.0 { -t } else { t };
+    let x = p.x + if p.x >= 0.0 { -t } else { t };
+    let y = p.y + if p.y >= 0.0 { -t } else { t };
     DVec3::new(x, y, z).normalize_or_zero()
 }
 

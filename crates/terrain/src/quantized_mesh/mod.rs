@@ -409,35 +409,15 @@ impl QuantizedMesh {
 /// Oct-encodes a unit normal into two bytes the way Cesium's `AttributeCompression.octEncode`
 /// does for quantized-mesh (range 0..=255).
 pub fn oct_encode_u8(n: DVec3) -> [u8; 2] {
-    let l1 = n.x.abs() + n.y.abs() + n.z.abs();
-    if l1 == 0.0 {
-        return [128, 128];
-    }
-    let (mut x, mut y) = (n.x / l1, n.y / l1);
-    if n.z < 0.0 {
-        let (ox, oy) = (x, y);
-        x = (1.0 - oy.abs()) * sign(ox);
-        y = (1.0 - ox.abs()) * sign(oy);
-    }
+    let p = crate::mesh::oct_project(n);
     let q = |v: f64| ((v.clamp(-1.0, 1.0) * 0.5 + 0.5) * 255.0).round() as u8;
-    [q(x), q(y)]
+    [q(p.x), q(p.y)]
 }
 
 /// Inverse of [`oct_encode_u8`].
 pub fn oct_decode_u8(e: [u8; 2]) -> DVec3 {
     let f = |b: u8| f64::from(b) / 255.0 * 2.0 - 1.0;
-    let (mut x, mut y) = (f(e[0]), f(e[1]));
-    let z = 1.0 - x.abs() - y.abs();
-    if z < 0.0 {
-        let (ox, oy) = (x, y);
-        x = (1.0 - oy.abs()) * sign(ox);
-        y = (1.0 - ox.abs()) * sign(oy);
-    }
-    DVec3::new(x, y, z).normalize_or_zero()
-}
-
-fn sign(v: f64) -> f64 {
-    if v < 0.0 { -1.0 } else { 1.0 }
+    crate::mesh::oct_unproject(globus_geo::DVec2::new(f(e[0]), f(e[1])))
 }
 
 fn zigzag(v: i32) -> u32 {
