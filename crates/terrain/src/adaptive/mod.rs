@@ -205,7 +205,45 @@ pub(crate) fn for_each_sample_in(p: [[u16; 2]; 3], mut f: impl FnMut(usize, usiz
 
 #[cfg(test)]
 pub(crate) mod test_grids {
-    use super::HeightGrid;
+    use super::{AdaptiveMesh, HeightGrid, for_each_sample_in};
+
+    /// A grid of `2^k + 1` samples of uniform noise in `0..relief_m` (xorshift, from `seed`).
+    pub fn random(k: u32, seed: u64, relief_m: f32) -> HeightGrid {
+        let side = (1usize << k) + 1;
+        let mut state = seed | 1;
+        let h = (0..side * side)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 40) as f32 / (1u64 << 24) as f32 * relief_m
+            })
+            .collect();
+        HeightGrid::new(side, h).expect("valid random grid")
+    }
+
+    /// Every triangle is counter-clockwise seen from above, their areas add up to the square,
+    /// and every sample lies in some triangle.
+    pub fn assert_covers(mesh: &AdaptiveMesh) {
+        let n = (mesh.side - 1) as i64;
+        let mut twice_area = 0i64;
+        let mut seen = vec![false; mesh.side * mesh.side];
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.vertices[i as usize].map(i64::from));
+            let a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+            assert!(
+                a < 0,
+                "triangle {p:?} is not counter-clockwise seen from above"
+            );
+            twice_area -= a;
+            for_each_sample_in(t.map(|i| mesh.vertices[i as usize]), |x, y, _| {
+                seen[y * mesh.side + x] = true;
+            });
+        }
+        assert_eq!(twice_area, 2 * n * n);
+        assert!(seen.iter().all(|s| *s));
+    }
 
     /// A rough synthetic grid: sums of ridged sines and a hash-based roughness, deterministic.
     pub fn rough(side: usize, seed: u32, relief_m: f32) -> HeightGrid {

@@ -397,31 +397,8 @@ fn row_deviation(row: &[f32], start: f32, step: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::adaptive::test_grids::rough;
+    use crate::adaptive::test_grids::{assert_covers, random, rough};
     use proptest::prelude::*;
-
-    /// Every grid cell is covered exactly once: triangle areas add up to the square and every
-    /// sample is inside some triangle.
-    fn assert_covers(mesh: &AdaptiveMesh) {
-        let n = (mesh.side - 1) as i64;
-        let mut twice_area = 0i64;
-        let mut seen = vec![false; mesh.side * mesh.side];
-        for t in &mesh.triangles {
-            let p = t.map(|i| mesh.vertices[i as usize].map(i64::from));
-            let a = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
-                - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
-            assert!(
-                a < 0,
-                "triangle {p:?} is not counter-clockwise seen from above"
-            );
-            twice_area -= a;
-            crate::adaptive::for_each_sample_in(t.map(|i| mesh.vertices[i as usize]), |x, y, _| {
-                seen[y * mesh.side + x] = true;
-            });
-        }
-        assert_eq!(twice_area, 2 * n * n);
-        assert!(seen.iter().all(|s| *s));
-    }
 
     #[test]
     fn flat_grid_is_two_triangles() {
@@ -495,17 +472,7 @@ mod tests {
             max_error in 0.0f64..40.0,
             relief in 0.0f32..500.0,
         ) {
-            let side = (1usize << k) + 1;
-            let mut state = seed | 1;
-            let h = (0..side * side)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 40) as f32 / (1u64 << 24) as f32 * relief
-                })
-                .collect();
-            let grid = HeightGrid::new(side, h).expect("grid");
+            let grid = random(k, seed, relief);
             let mesh = Rtin::new(&grid).mesh(max_error);
             prop_assert!(mesh.max_error(&grid) <= max_error + 1e-3);
             assert_covers(&mesh);

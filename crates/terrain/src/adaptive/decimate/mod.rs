@@ -159,7 +159,8 @@ pub(super) fn scan_triangle(grid: &HeightGrid, p: [[u16; 2]; 3]) -> (f32, [u16; 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::adaptive::{Rtin, test_grids::rough};
+    use crate::adaptive::Rtin;
+    use crate::adaptive::test_grids::{assert_covers, random, rough};
     use proptest::prelude::*;
 
     #[test]
@@ -218,31 +219,10 @@ mod tests {
             max_error in 0.0f64..30.0,
             relief in 0.0f32..300.0,
         ) {
-            let side = (1usize << k) + 1;
-            let mut state = seed | 1;
-            let h = (0..side * side)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 40) as f32 / (1u64 << 24) as f32 * relief
-                })
-                .collect();
-            let grid = HeightGrid::new(side, h).expect("grid");
+            let grid = random(k, seed, relief);
             let mesh = decimate(&grid, max_error);
             prop_assert!(mesh.max_error(&grid) <= max_error + 1e-3);
-            let n = (side - 1) as i64;
-            let twice_area: i64 = mesh
-                .triangles
-                .iter()
-                .map(|t| -orient(mesh.vertices[t[0] as usize], mesh.vertices[t[1] as usize], mesh.vertices[t[2] as usize]))
-                .sum();
-            prop_assert_eq!(twice_area, 2 * n * n);
-            prop_assert!(mesh.triangles.iter().all(|t| orient(
-                mesh.vertices[t[0] as usize],
-                mesh.vertices[t[1] as usize],
-                mesh.vertices[t[2] as usize]
-            ) < 0));
+            assert_covers(&mesh);
         }
     }
 }
