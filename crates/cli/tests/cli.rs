@@ -1,29 +1,7 @@
 //! The `globus` binary as a user runs it: outputs, and one clear line for every bad input.
 
-use std::process::{Command, Output};
-
-fn globus(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_globus"))
-        .args(args)
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .expect("run globus")
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("JSON on stdout")
-}
-
-/// Fails with a non-zero status and exactly one line on stderr containing `needle`.
-fn fails_with_one_line(args: &[&str], needle: &str) {
-    globus_test_support::assert_one_line_failure(&format!("{args:?}"), &globus(args), &[needle]);
-}
+mod common;
+use common::{fails_with_one_line, globus, json};
 
 #[test]
 fn geo_ecef_and_back() {
@@ -162,13 +140,13 @@ fn bad_arguments_end_with_one_clear_line() {
             .split(' ')
             .map(|a| if a == "OUT" { png } else { a })
             .collect();
-        fails_with_one_line(&args, needle);
+        fails_with_one_line(&args, &[needle]);
     }
 }
 
 #[test]
 fn view_without_a_display_fails_at_once_pointing_to_render() {
-    fails_with_one_line(&["view"], "globus render");
+    fails_with_one_line(&["view"], &["globus render"]);
 }
 
 #[test]

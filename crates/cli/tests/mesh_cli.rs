@@ -5,7 +5,10 @@
 #![allow(clippy::unwrap_used)] // test helpers: a failure should stop the test
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
+
+mod common;
+use common::{fails_with_one_line, globus, json, s};
 
 use globus_geo::{DVec3, Ellipsoid};
 use globus_terrain::encoding::ElevationEncoding;
@@ -16,32 +19,12 @@ use globus_terrain::quantized_mesh::{
 use globus_tiling::{TileKey, TilingScheme};
 use serde_json::Value;
 
-fn globus(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_globus"))
-        .args(args)
-        .output()
-        .expect("run globus")
-}
-
 fn globus_json(args: &[&str]) -> Value {
-    let out = globus(args);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    json(&globus(args))
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = globus_test_support::output_dir("mesh_cli").join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::scratch("mesh_cli", name)
 }
 
 fn python(args: &[&str]) -> Value {
@@ -442,110 +425,70 @@ fn bad_input_gets_one_line() {
     .encode(false);
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     let out = dir.join("x.terrain");
-    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+    // A valid mesh request for `input`, then `extra` arguments.
+    let mesh = |input: &Path, extra: &[&str]| {
+        let mut args = vec!["--in".to_owned(), s(input).to_owned()];
+        for a in ["--encoding", "terrarium", "--max-error", "1"]
+            .iter()
+            .chain(extra)
+        {
+            args.push((*a).to_owned());
+        }
+        args
+    };
+    let own = |args: &[&str]| args.iter().map(|a| (*a).to_owned()).collect::<Vec<_>>();
+    let cases: Vec<(Vec<String>, Vec<&str>)> = vec![
         (
-            vec!["--in", s(&png), "--max-error", "1"],
+            own(&["--in", s(&png), "--max-error", "1"]),
             vec!["--encoding"],
         ),
         (
-            vec!["--in", s(&png), "--encoding", "terrarium"],
+            own(&["--in", s(&png), "--encoding", "terrarium"]),
             vec!["--max-error"],
         ),
         (
-            vec![
+            own(&[
                 "--in",
                 s(&png),
                 "--encoding",
                 "terrarium",
                 "--max-error",
                 "-1",
-            ],
+            ]),
             vec!["non-negative"],
         ),
         (
-            vec![
+            own(&[
                 "--in",
                 s(&png),
                 "--encoding",
                 "elevation",
                 "--max-error",
                 "1",
-            ],
+            ]),
             vec!["elevation"],
         ),
+        (mesh(&png, &["--method", "fast"]), vec!["fast"]),
+        (mesh(&odd, &[]), vec!["odd.png", "2^k"]),
+        (mesh(&wide, &[]), vec!["wide.png", "not square"]),
+        (own(&["--in", s(&junk)]), vec!["junk.terrain"]),
         (
-            vec![
-                "--in",
-                s(&png),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-                "--method",
-                "fast",
-            ],
-            vec!["fast"],
+            own(&["--in", s(&cut)]),
+            vec!["cut.terrain", "quantized-mesh"],
         ),
         (
-            vec![
-                "--in",
-                s(&odd),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-            ],
-            vec!["odd.png", "2^k"],
-        ),
-        (
-            vec![
-                "--in",
-                s(&wide),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-            ],
-            vec!["wide.png", "not square"],
-        ),
-        (vec!["--in", s(&junk)], vec!["junk.terrain"]),
-        (vec!["--in", s(&cut)], vec!["cut.terrain", "quantized-mesh"]),
-        (
-            vec!["--in", "/nonexistent/t.png"],
+            own(&["--in", "/nonexistent/t.png"]),
             vec!["/nonexistent/t.png"],
         ),
+        (mesh(&png, &["--out", s(&out)]), vec!["--tile"]),
         (
-            vec![
-                "--in",
-                s(&png),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-                "--out",
-                s(&out),
-            ],
-            vec!["--tile"],
-        ),
-        (
-            vec![
-                "--in",
-                s(&png),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-                "--out",
-                s(&out),
-                "--tile",
-                "3/99/0",
-            ],
+            mesh(&png, &["--out", s(&out), "--tile", "3/99/0"]),
             vec!["3/99/0"],
         ),
     ];
     for (args, needles) in cases {
         let mut all = vec!["mesh"];
-        all.extend(args);
-        globus_test_support::assert_one_line_failure(&format!("{all:?}"), &globus(&all), &needles);
+        all.extend(args.iter().map(String::as_str));
+        fails_with_one_line(&all, &needles);
     }
 }

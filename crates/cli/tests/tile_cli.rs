@@ -3,30 +3,12 @@
 
 #![allow(clippy::unwrap_used)] // test helpers: a failure should stop the test
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{fails_with_one_line, globus, s};
+use std::process::Command;
 
-fn globus(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_globus"))
-        .args(args)
-        .output()
-        .expect("run globus")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = globus_test_support::output_dir("tile_cli").join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Fails with a non-zero status and exactly one line on stderr containing every needle.
-fn fails_with_one_line(args: &[&str], needles: &[&str]) {
-    globus_test_support::assert_one_line_failure(&format!("{args:?}"), &globus(args), needles);
+fn scratch(name: &str) -> std::path::PathBuf {
+    common::scratch("tile_cli", name)
 }
 
 #[test]
