@@ -86,13 +86,6 @@ impl Rtin {
                 ..AdaptiveMesh::default()
             },
         };
-        // Errors grow towards the root, so every sample whose error exceeds the bound is a
-        // midpoint that gets split: that is the vertex count, and a triangulated square has
-        // fewer than twice as many triangles as vertices.
-        let max_error = builder.max_error;
-        let vertices = 4 + self.errors.iter().filter(|&&e| e > max_error).count();
-        builder.mesh.vertices.reserve_exact(vertices);
-        builder.mesh.triangles.reserve_exact(2 * vertices);
         builder.split([0, 0], [n, n], [n, 0]);
         builder.split([n, n], [0, 0], [0, n]);
         builder.mesh
