@@ -24,6 +24,7 @@ use globus_render::{
 use globus_stream::{
     LayerStats, ProceduralSource, TerrainLayer, TerrainLayerOptions, TerrainSource,
 };
+use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
 use globus_tiling::{
     Selection, SelectionOptions, SelectionStats, TileKey, TileRequest, TilingScheme, select_into,
@@ -50,6 +51,8 @@ pub struct GlobeOptions {
     pub cache_bytes: usize,
     /// Tile worker threads.
     pub workers: usize,
+    /// How tile meshes are cut.
+    pub mesh: MeshOptions,
 }
 
 impl Default for GlobeOptions {
@@ -62,6 +65,7 @@ impl Default for GlobeOptions {
             uploads_per_frame: 24,
             cache_bytes: TerrainLayerOptions::default().cache_bytes,
             workers: TerrainLayerOptions::default().workers,
+            mesh: MeshOptions::default(),
         }
     }
 }
@@ -109,8 +113,9 @@ impl Globe {
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
     ) -> Self {
-        let source: Arc<dyn TerrainSource> =
-            Arc::new(ProceduralSource::new(options.seed, options.max_level));
+        let source: Arc<dyn TerrainSource> = Arc::new(
+            ProceduralSource::new(options.seed, options.max_level).with_mesh_options(options.mesh),
+        );
         let layer = TerrainLayer::new(
             source,
             TerrainLayerOptions {
@@ -121,8 +126,8 @@ impl Globe {
         let pool = TilePool::new(
             device,
             TilePoolOptions {
-                slots: options.gpu_slots,
                 uploads_per_frame: options.uploads_per_frame,
+                ..TilePoolOptions::with_slots(options.gpu_slots, 0.625)
             },
         );
         let selection_options = SelectionOptions {
@@ -234,18 +239,16 @@ impl Globe {
             let Some(data) = self.layer.get(r.key) else {
                 continue;
             };
-            match pool.upload(queue, r.key, &data.mesh, &data.tile.colour) {
-                Some(upload) => {
-                    if let Some(evicted) = upload.evicted {
-                        self.layer.set_drawable(evicted, false);
-                    }
-                    self.layer.set_drawable(r.key, true);
-                }
-                None => {
-                    pool_full = true;
-                    break;
-                }
+            let mut evicted = Vec::new();
+            let uploaded = pool.upload(queue, r.key, &data.mesh, &data.tile.colour, &mut evicted);
+            for k in evicted {
+                self.layer.set_drawable(k, false);
             }
+            if uploaded.is_none() {
+                pool_full = true;
+                break;
+            }
+            self.layer.set_drawable(r.key, true);
         }
         let budget_bound = pool_full || layer_stats.over_budget;
         self.adapt_detail(budget_bound);

@@ -59,6 +59,10 @@ struct GlobeArgs {
     /// Vertical field of view in degrees.
     #[arg(long = "fov-deg", default_value_t = 60.0)]
     fov_deg: f64,
+    /// Vertical error a tile's adaptive mesh may add, as a fraction of the tile's geometric
+    /// error (0 draws every sample of the tile grid).
+    #[arg(long = "mesh-error", default_value_t = globus_terrain::MeshOptions::default().error_fraction)]
+    mesh_error: f64,
 }
 
 #[derive(Args)]
@@ -266,9 +270,18 @@ fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
             a.fov_deg
         );
     }
+    if !(0.0..=4.0).contains(&a.mesh_error) {
+        bail!(
+            "--mesh-error {} must be a fraction of the tile error from 0 to 4",
+            a.mesh_error
+        );
+    }
     Ok(GlobeOptions {
         seed: a.seed,
         max_sse_px: a.sse,
+        mesh: globus_terrain::MeshOptions {
+            error_fraction: a.mesh_error,
+        },
         ..GlobeOptions::default()
     })
 }
@@ -468,6 +481,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     summary.insert("frames".into(), json!(frames));
     summary.insert("size".into(), json!([width, height]));
     summary.insert("sse_px".into(), json!(a.globe.sse));
+    summary.insert("mesh_error".into(), json!(a.globe.mesh_error));
     for (k, name) in names.iter().enumerate() {
         let mut v: Vec<f64> = samples.iter().map(|s| s[k]).collect();
         v.sort_by(f64::total_cmp);

@@ -1,19 +1,20 @@
 //! [`GlobeRenderer`]: sky and terrain in two draw calls.
 //!
 //! Per frame, in two phases:
-//! 1. [`GlobeRenderer::prepare`] (CPU): writes the frame uniforms and one instance per drawn
-//!    tile (its pool slot and its centre-to-eye offset, subtracted in f64 then rounded to f32).
+//! 1. [`GlobeRenderer::prepare`] (CPU): writes the frame uniforms, each drawn tile's
+//!    centre-to-eye offset (subtracted in f64, then rounded to f32) at its pool slot, and one
+//!    indirect draw record per drawn tile (its index range and base vertex in the pools).
 //! 2. [`GlobeRenderer::render`] (GPU): draws the sky with a full-screen triangle, then every
-//!    terrain tile with one instanced, indexed draw over the shared tile grid. The vertex
-//!    shader pulls each vertex from the pool by `slot * VERTICES_PER_TILE + vertex_index`.
+//!    terrain tile, whatever its mesh, with one `multi_draw_indexed_indirect` over the shared
+//!    vertex and index pools. Each vertex carries its slot, which picks its offset and colour
+//!    layer.
 
 use std::mem::size_of;
 
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{DVec3, View};
-use globus_terrain::grid::{index_count, triangle_indices};
+use globus_terrain::TerrainVertex;
 use globus_tiling::TileKey;
-use wgpu::util::DeviceExt;
 
 use crate::camera::CameraMatrices;
 use crate::pool::TilePool;
@@ -32,12 +33,15 @@ struct FrameUniforms {
     viewport: [f32; 4],
 }
 
-/// One drawn tile (mirrors `TileInstance` in `terrain.wgsl`).
+/// One indirect draw (the layout `multi_draw_indexed_indirect` reads).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct TileInstance {
-    offset: [f32; 3],
-    slot: u32,
+struct DrawIndexedArgs {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    base_vertex: i32,
+    first_instance: u32,
 }
 
 /// Sun and atmosphere.
@@ -95,7 +99,7 @@ pub struct DrawStats {
     pub draw_calls: u32,
     /// Terrain tiles drawn.
     pub tiles: u32,
-    /// Triangles submitted (tiles x triangles per tile, skirts included).
+    /// Triangles submitted (skirts included).
     pub triangles: u64,
     /// Tiles asked for but not resident (drawn by nobody; should stay 0).
     pub missing: u32,
@@ -109,10 +113,11 @@ pub struct GlobeRenderer {
     terrain_bind_group: Option<wgpu::BindGroup>,
     terrain_pipeline: wgpu::RenderPipeline,
     sky_pipeline: wgpu::RenderPipeline,
-    index_buffer: wgpu::Buffer,
-    instance_buffer: wgpu::Buffer,
-    instance_capacity: u32,
-    instances: Vec<TileInstance>,
+    offset_buffer: wgpu::Buffer,
+    offsets: Vec<[f32; 4]>,
+    indirect_buffer: wgpu::Buffer,
+    indirect_capacity: u32,
+    draws: Vec<DrawIndexedArgs>,
     sampler: wgpu::Sampler,
     /// The GPU tile pools.
     pub pool: TilePool,
@@ -153,12 +158,6 @@ impl GlobeRenderer {
         let terrain_pipeline =
             terrain_pipeline(device, colour_format, &frame_layout, &terrain_layout);
         let sky_pipeline = sky_pipeline(device, colour_format, &frame_layout);
-        let indices = triangle_indices();
-        let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("tile grid indices"),
-            contents: bytemuck::cast_slice(&indices),
-            usage: wgpu::BufferUsages::INDEX,
-        });
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("terrain colour"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -169,8 +168,15 @@ impl GlobeRenderer {
             anisotropy_clamp: 8,
             ..Default::default()
         });
-        let instance_capacity = 256;
-        let instance_buffer = instance_buffer(device, instance_capacity);
+        let slots = pool.capacity();
+        let offset_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tile offsets"),
+            size: u64::from(slots) * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let indirect_capacity = 256;
+        let indirect_buffer = indirect_buffer(device, indirect_capacity);
         Self {
             frame_buffer,
             frame_bind_group,
@@ -178,10 +184,11 @@ impl GlobeRenderer {
             terrain_bind_group: None,
             terrain_pipeline,
             sky_pipeline,
-            index_buffer,
-            instance_buffer,
-            instance_capacity,
-            instances: Vec::new(),
+            offset_buffer,
+            offsets: vec![[0.0; 4]; slots as usize],
+            indirect_buffer,
+            indirect_capacity,
+            draws: Vec::new(),
             sampler,
             pool,
             stats: DrawStats::default(),
@@ -220,41 +227,43 @@ impl GlobeRenderer {
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));
 
-        self.instances.clear();
+        self.draws.clear();
         let mut missing = 0;
+        let mut triangles = 0u64;
         for &key in inputs.tiles {
-            let Some(slot) = self.pool.slot(key) else {
+            let Some(r) = self.pool.resident(key) else {
                 missing += 1;
                 continue;
             };
-            let centre = self.pool.centre(slot).unwrap_or(DVec3::ZERO);
             // The one place a planet-sized number becomes f32: after the f64 subtraction.
-            let offset = (centre - view.position).as_vec3();
-            self.instances.push(TileInstance {
-                offset: offset.to_array(),
-                slot,
+            let offset = (r.centre - view.position).as_vec3();
+            self.offsets[r.slot as usize] = [offset.x, offset.y, offset.z, 0.0];
+            let index_count = r.indices.len() as u32;
+            triangles += u64::from(index_count / 3);
+            self.draws.push(DrawIndexedArgs {
+                index_count,
+                instance_count: 1,
+                first_index: r.indices.start,
+                base_vertex: r.vertices.start as i32,
+                first_instance: 0,
             });
         }
-        let count = self.instances.len() as u32;
-        if count > self.instance_capacity || self.terrain_bind_group.is_none() {
-            if count > self.instance_capacity {
-                self.instance_capacity = count.next_power_of_two();
-                self.instance_buffer = instance_buffer(device, self.instance_capacity);
-            }
+        let count = self.draws.len() as u32;
+        if count > self.indirect_capacity {
+            self.indirect_capacity = count.next_power_of_two();
+            self.indirect_buffer = indirect_buffer(device, self.indirect_capacity);
+        }
+        if self.terrain_bind_group.is_none() {
             self.terrain_bind_group = Some(self.terrain_bind_group(device));
         }
-        if !self.instances.is_empty() {
-            queue.write_buffer(
-                &self.instance_buffer,
-                0,
-                bytemuck::cast_slice(&self.instances),
-            );
+        if !self.draws.is_empty() {
+            queue.write_buffer(&self.offset_buffer, 0, bytemuck::cast_slice(&self.offsets));
+            queue.write_buffer(&self.indirect_buffer, 0, bytemuck::cast_slice(&self.draws));
         }
-        let triangles_per_tile = u64::from(index_count() / 3);
         self.stats = DrawStats {
             draw_calls: if count > 0 { 2 } else { 1 },
             tiles: count,
-            triangles: u64::from(count) * triangles_per_tile,
+            triangles,
             missing,
         };
         self.stats
@@ -295,12 +304,18 @@ impl GlobeRenderer {
         pass.set_pipeline(&self.sky_pipeline);
         pass.draw(0..3, 0..1);
         if let Some(bind_group) = &self.terrain_bind_group
-            && !self.instances.is_empty()
+            && !self.draws.is_empty()
         {
+            let (vertices, slots) = self.pool.vertex_buffers();
             pass.set_pipeline(&self.terrain_pipeline);
             pass.set_bind_group(1, bind_group, &[]);
-            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..index_count(), 0, 0..self.instances.len() as u32);
+            pass.set_vertex_buffer(0, vertices.slice(..));
+            pass.set_vertex_buffer(1, slots.slice(..));
+            pass.set_index_buffer(
+                self.pool.index_buffer().slice(..),
+                wgpu::IndexFormat::Uint32,
+            );
+            pass.multi_draw_indexed_indirect(&self.indirect_buffer, 0, self.draws.len() as u32);
         }
     }
 
@@ -316,18 +331,14 @@ impl GlobeRenderer {
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: self.pool.vertex_buffer().as_entire_binding(),
+                    resource: self.offset_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: self.instance_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
                     resource: wgpu::BindingResource::TextureView(self.pool.colour_view()),
                 },
                 wgpu::BindGroupEntry {
-                    binding: 3,
+                    binding: 2,
                     resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
             ],
@@ -335,36 +346,31 @@ impl GlobeRenderer {
     }
 }
 
-fn instance_buffer(device: &wgpu::Device, capacity: u32) -> wgpu::Buffer {
+fn indirect_buffer(device: &wgpu::Device, capacity: u32) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("tile instances"),
-        size: u64::from(capacity) * size_of::<TileInstance>() as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        label: Some("terrain draws"),
+        size: u64::from(capacity) * size_of::<DrawIndexedArgs>() as u64,
+        usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
-}
-
-fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::VERTEX,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("terrain"),
         entries: &[
-            storage_entry(0),
-            storage_entry(1),
             wgpu::BindGroupLayoutEntry {
-                binding: 2,
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: true },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
                 visibility: wgpu::ShaderStages::FRAGMENT,
                 ty: wgpu::BindingType::Texture {
                     sample_type: wgpu::TextureSampleType::Float { filterable: true },
@@ -374,7 +380,7 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
                 count: None,
             },
             wgpu::BindGroupLayoutEntry {
-                binding: 3,
+                binding: 2,
                 visibility: wgpu::ShaderStages::FRAGMENT,
                 ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                 count: None,
@@ -382,6 +388,11 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         ],
     })
 }
+
+/// Vertex streams: [`TerrainVertex`] from the pool, and the slot of each vertex.
+const TERRAIN_VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
+    wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Unorm16x2];
+const SLOT_ATTRIBUTES: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![3 => Uint32];
 
 fn terrain_pipeline(
     device: &wgpu::Device,
@@ -405,7 +416,18 @@ fn terrain_pipeline(
             module: &module,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &[],
+            buffers: &[
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: size_of::<TerrainVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &TERRAIN_VERTEX_ATTRIBUTES,
+                }),
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: 4,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &SLOT_ATTRIBUTES,
+                }),
+            ],
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,

@@ -2,11 +2,13 @@
 //! wgpu.
 //!
 //! * [`GpuContext`]: instance, adapter, device and queue, with or without a window.
-//! * [`TilePool`]: fixed GPU slot arrays (a vertex pool and a colour texture array) mirroring
-//!   the CPU tile cache, with least-recently-used eviction and an upload budget per frame.
+//! * [`TilePool`]: fixed-size GPU pools mirroring the CPU tile cache: shared vertex and index
+//!   buffers sub-allocated per tile ([`RangeAllocator`]), so every tile can have its own
+//!   (adaptive) mesh, and a colour texture array; least-recently-used eviction and an upload
+//!   budget per frame.
 //! * [`GlobeRenderer`]: draws the sky and all terrain tiles with two draw calls, whatever the
-//!   number of tiles: one instanced draw over the shared tile grid, vertex data pulled from the
-//!   pool by slot. Positions are f32 offsets from each tile's centre plus a centre-to-eye
+//!   number of tiles and their meshes: one `multi_draw_indexed_indirect` over the pools.
+//!   Positions are f32 offsets from each tile's centre plus a centre-to-eye
 //!   offset computed in f64 every frame (camera-relative rendering), and depth is reversed-Z
 //!   with an infinite far plane in a 32-bit float buffer.
 //! * [`OffscreenTarget`]: rendering without a window, read back as RGBA.
@@ -15,11 +17,15 @@ mod camera;
 mod context;
 mod globe;
 mod pool;
+mod ranges;
 pub mod shaders;
 mod target;
 
 pub use camera::{CameraMatrices, near_plane_m};
 pub use context::{GpuContext, RenderError};
 pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting};
-pub use pool::{PoolStats, TilePool, TilePoolOptions, Upload};
+pub use pool::{
+    MAX_TILE_INDICES, MAX_TILE_VERTICES, PoolStats, Residency, Resident, TilePool, TilePoolOptions,
+};
+pub use ranges::RangeAllocator;
 pub use target::{DEPTH_FORMAT, DepthTarget, OffscreenTarget, RgbaImage};

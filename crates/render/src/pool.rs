@@ -1,18 +1,34 @@
-//! [`TilePool`]: the GPU mirror of the CPU tile cache, in fixed slot arrays.
+//! [`TilePool`]: the GPU mirror of the CPU tile cache, in buffers that never grow.
 //!
-//! One storage buffer holds every slot's vertices (slot `s` at `s * VERTICES_PER_TILE`) and
-//! one 2D texture array holds every slot's colour image (layer `s`, full mip chain). Both are
-//! allocated once at their full size, so GPU memory never grows. A tile is *resident* when it
-//! has a slot; slots are reused least-recently-drawn first, never while in use this frame, and
-//! at most [`TilePoolOptions::uploads_per_frame`] tiles are uploaded per frame.
+//! * One vertex buffer and one index buffer shared by every tile: each resident tile owns a
+//!   range of each (sub-allocated first fit, see [`RangeAllocator`]), so meshes of any size
+//!   (adaptive cuts keep 12 to 1221 vertices of a tile) pack together and one
+//!   `multi_draw_indexed_indirect` draws them all. Indices are tile-local; the draw's base
+//!   vertex points at the tile's range.
+//! * A parallel per-vertex buffer of slot numbers: the vertex shader finds its tile's
+//!   centre-to-eye offset and colour layer from it (portable: no first-instance feature).
+//! * One 2D texture array with one layer (full mip chain) per slot for colour.
+//!
+//! A tile is *resident* when it has a slot and its ranges. Room is made by evicting the least
+//! recently drawn tiles, never one used this frame, and at most
+//! [`TilePoolOptions::uploads_per_frame`] tiles are uploaded per frame. The bookkeeping is in
+//! [`Residency`], plain CPU code tested without a GPU.
 
 use std::mem::size_of;
+use std::ops::Range;
 
 use globus_geo::DVec3;
-use globus_terrain::grid::{COLOUR_SIZE, VERTICES_PER_TILE};
-use globus_terrain::{ColourImage, TileMesh};
+use globus_terrain::grid::COLOUR_SIZE;
+use globus_terrain::{ColourImage, TerrainVertex, TileMesh};
 use globus_tiling::TileKey;
 use rustc_hash::FxHashMap;
+
+use crate::ranges::RangeAllocator;
+
+/// Vertices of the largest tile mesh (every sample of the 33 x 33 grid and its skirts).
+pub const MAX_TILE_VERTICES: u32 = 33 * 33 + 4 * 33;
+/// Indices of the largest tile mesh.
+pub const MAX_TILE_INDICES: u32 = (2 * 32 * 32 + 4 * 32 * 2) * 3;
 
 /// Size of the pools.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -21,14 +37,30 @@ pub struct TilePoolOptions {
     pub slots: u32,
     /// Tiles uploaded per frame at most.
     pub uploads_per_frame: u32,
+    /// Vertices the shared vertex buffer holds.
+    pub vertices: u32,
+    /// Indices the shared index buffer holds.
+    pub indices: u32,
+}
+
+impl TilePoolOptions {
+    /// `slots` slots with vertex and index room for `fill` (0..1] of them at full grid size:
+    /// adaptive meshes average well under that, and when a view of rough ground needs more,
+    /// uploads fail and the engine lowers detail instead of growing.
+    pub fn with_slots(slots: u32, fill: f64) -> Self {
+        let per = |max: u32| (f64::from(slots) * f64::from(max) * fill.clamp(0.01, 1.0)) as u32;
+        Self {
+            slots,
+            uploads_per_frame: 24,
+            vertices: per(MAX_TILE_VERTICES).max(MAX_TILE_VERTICES),
+            indices: per(MAX_TILE_INDICES).max(MAX_TILE_INDICES),
+        }
+    }
 }
 
 impl Default for TilePoolOptions {
     fn default() -> Self {
-        Self {
-            slots: 1024,
-            uploads_per_frame: 24,
-        }
+        Self::with_slots(1024, 0.625)
     }
 }
 
@@ -45,59 +77,224 @@ pub struct PoolStats {
     pub uploaded_total: u64,
     /// Tiles evicted since the start.
     pub evicted_total: u64,
+    /// Vertices in use / capacity.
+    pub vertices_used: u32,
+    /// Vertex capacity.
+    pub vertex_capacity: u32,
+    /// Indices in use.
+    pub indices_used: u32,
+    /// Index capacity.
+    pub index_capacity: u32,
     /// GPU bytes of the pools (fixed).
     pub gpu_bytes: u64,
 }
 
-/// Where an upload went.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Upload {
-    /// The slot now holding the tile.
+/// A resident tile's place in the pools.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resident {
+    /// The tile.
+    pub key: TileKey,
+    /// Colour layer and offset entry.
     pub slot: u32,
-    /// The tile that was evicted to make room, if any.
-    pub evicted: Option<TileKey>,
+    /// Its vertices in the shared vertex buffer.
+    pub vertices: Range<u32>,
+    /// Its indices in the shared index buffer.
+    pub indices: Range<u32>,
+    /// ECEF origin of its vertices.
+    pub centre: DVec3,
+    last_used: u64,
 }
 
-#[derive(Clone, Copy, Debug)]
-struct Slot {
-    key: TileKey,
-    centre: DVec3,
-    last_used: u64,
+/// Which tile sits where: slots, buffer ranges and recency. No GPU objects.
+#[derive(Clone, Debug)]
+pub struct Residency {
+    slot_of: FxHashMap<TileKey, u32>,
+    slots: Vec<Option<Resident>>,
+    free_slots: Vec<u32>,
+    vertices: RangeAllocator,
+    indices: RangeAllocator,
+    frame: u64,
+}
+
+impl Residency {
+    /// Empty pools of the given sizes.
+    pub fn new(slots: u32, vertices: u32, indices: u32) -> Self {
+        Self {
+            slot_of: FxHashMap::default(),
+            slots: vec![None; slots as usize],
+            free_slots: (0..slots).rev().collect(),
+            vertices: RangeAllocator::new(vertices),
+            indices: RangeAllocator::new(indices),
+            frame: 0,
+        }
+    }
+
+    /// Starts a frame: tiles touched from now on are protected from eviction.
+    pub fn begin_frame(&mut self) {
+        self.frame += 1;
+    }
+
+    /// The resident tile `key`.
+    pub fn get(&self, key: TileKey) -> Option<&Resident> {
+        let slot = *self.slot_of.get(&key)?;
+        self.slots[slot as usize].as_ref()
+    }
+
+    /// Marks a resident tile as used this frame.
+    pub fn touch(&mut self, key: TileKey) {
+        if let Some(&s) = self.slot_of.get(&key)
+            && let Some(r) = self.slots[s as usize].as_mut()
+        {
+            r.last_used = self.frame;
+        }
+    }
+
+    /// Makes room for a tile of `vertices` and `indices` and records it (used this frame).
+    /// Returns its place, or `None` if it cannot fit without evicting a tile used this frame.
+    /// Every tile evicted on the way is pushed to `evicted`, whether or not the call succeeds.
+    pub fn place(
+        &mut self,
+        key: TileKey,
+        vertices: u32,
+        indices: u32,
+        centre: DVec3,
+        evicted: &mut Vec<TileKey>,
+    ) -> Option<Resident> {
+        if let Some(r) = self.get(key) {
+            return Some(r.clone());
+        }
+        if vertices > self.vertices.capacity() || indices > self.indices.capacity() {
+            return None;
+        }
+        let slot = loop {
+            if let Some(s) = self.free_slots.pop() {
+                break s;
+            }
+            evicted.push(self.evict_oldest()?);
+        };
+        let v = loop {
+            if let Some(r) = self.vertices.allocate(vertices) {
+                break r;
+            }
+            match self.evict_oldest() {
+                Some(k) => evicted.push(k),
+                None => {
+                    self.free_slots.push(slot);
+                    return None;
+                }
+            }
+        };
+        let i = loop {
+            if let Some(r) = self.indices.allocate(indices) {
+                break r;
+            }
+            match self.evict_oldest() {
+                Some(k) => evicted.push(k),
+                None => {
+                    self.free_slots.push(slot);
+                    self.vertices.free(v);
+                    return None;
+                }
+            }
+        };
+        let resident = Resident {
+            key,
+            slot,
+            vertices: v,
+            indices: i,
+            centre,
+            last_used: self.frame,
+        };
+        self.slots[slot as usize] = Some(resident.clone());
+        self.slot_of.insert(key, slot);
+        Some(resident)
+    }
+
+    /// Evicts the least recently used tile not used this frame.
+    fn evict_oldest(&mut self) -> Option<TileKey> {
+        let (index, _) = self
+            .slots
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| s.as_ref().map(|s| (i, s.last_used)))
+            .filter(|&(_, used)| used < self.frame)
+            .min_by_key(|&(_, used)| used)?;
+        let victim = self.slots[index].take()?;
+        self.slot_of.remove(&victim.key);
+        self.free_slots.push(victim.slot);
+        self.vertices.free(victim.vertices);
+        self.indices.free(victim.indices);
+        Some(victim.key)
+    }
+
+    /// Number of resident tiles.
+    pub fn len(&self) -> usize {
+        self.slot_of.len()
+    }
+
+    /// Whether no tile is resident.
+    pub fn is_empty(&self) -> bool {
+        self.slot_of.is_empty()
+    }
+
+    /// Number of slots.
+    pub fn slot_capacity(&self) -> u32 {
+        self.slots.len() as u32
+    }
+
+    /// The vertex and index allocators.
+    pub fn ranges(&self) -> (&RangeAllocator, &RangeAllocator) {
+        (&self.vertices, &self.indices)
+    }
 }
 
 /// Fixed-size GPU pools for terrain tiles.
 pub struct TilePool {
     vertex_buffer: wgpu::Buffer,
+    slot_buffer: wgpu::Buffer,
+    index_buffer: wgpu::Buffer,
     colour_texture: wgpu::Texture,
     colour_view: wgpu::TextureView,
-    slot_of: FxHashMap<TileKey, u32>,
-    slots: Vec<Option<Slot>>,
-    free: Vec<u32>,
-    frame: u64,
+    residency: Residency,
     options: TilePoolOptions,
     stats: PoolStats,
 }
 
 const MIP_LEVELS: u32 = COLOUR_SIZE.ilog2() + 1;
-const VERTEX_BYTES: u64 = VERTICES_PER_TILE as u64 * 16;
+const VERTEX_BYTES: u64 = size_of::<TerrainVertex>() as u64;
 
 impl TilePool {
     /// Allocates the pools.
     pub fn new(device: &wgpu::Device, options: TilePoolOptions) -> Self {
         let limits = device.limits();
-        let by_buffer =
-            (limits.max_storage_buffer_binding_size / VERTEX_BYTES).min(u64::from(u32::MAX)) as u32;
-        let slots = options
-            .slots
-            .min(limits.max_texture_array_layers)
-            .min(by_buffer)
-            .max(1);
-        let vertex_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("terrain vertex pool"),
-            size: u64::from(slots) * VERTEX_BYTES,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let slots = options.slots.min(limits.max_texture_array_layers).max(1);
+        let max_buffer = limits.max_buffer_size;
+        let vertices = (u64::from(options.vertices).min(max_buffer / VERTEX_BYTES) as u32)
+            .max(MAX_TILE_VERTICES);
+        let indices = (u64::from(options.indices).min(max_buffer / 4) as u32).max(MAX_TILE_INDICES);
+        let buffer = |label, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: usage | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let vertex_buffer = buffer(
+            "terrain vertex pool",
+            u64::from(vertices) * VERTEX_BYTES,
+            wgpu::BufferUsages::VERTEX,
+        );
+        let slot_buffer = buffer(
+            "terrain vertex slots",
+            u64::from(vertices) * 4,
+            wgpu::BufferUsages::VERTEX,
+        );
+        let index_buffer = buffer(
+            "terrain index pool",
+            u64::from(indices) * 4,
+            wgpu::BufferUsages::INDEX,
+        );
         let colour_texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("terrain colour pool"),
             size: wgpu::Extent3d {
@@ -121,18 +318,26 @@ impl TilePool {
             .map(|m| u64::from((COLOUR_SIZE >> m).pow(2)) * 4)
             .sum::<u64>()
             * u64::from(slots);
+        let gpu_bytes =
+            u64::from(vertices) * (VERTEX_BYTES + 4) + u64::from(indices) * 4 + colour_bytes;
         Self {
             vertex_buffer,
+            slot_buffer,
+            index_buffer,
             colour_texture,
             colour_view,
-            slot_of: FxHashMap::default(),
-            slots: vec![None; slots as usize],
-            free: (0..slots).rev().collect(),
-            frame: 0,
-            options: TilePoolOptions { slots, ..options },
+            residency: Residency::new(slots, vertices, indices),
+            options: TilePoolOptions {
+                slots,
+                vertices,
+                indices,
+                ..options
+            },
             stats: PoolStats {
                 capacity: slots,
-                gpu_bytes: u64::from(slots) * VERTEX_BYTES + colour_bytes,
+                vertex_capacity: vertices,
+                index_capacity: indices,
+                gpu_bytes,
                 ..PoolStats::default()
             },
         }
@@ -140,7 +345,7 @@ impl TilePool {
 
     /// Starts a frame: resets the upload budget.
     pub fn begin_frame(&mut self) {
-        self.frame += 1;
+        self.residency.begin_frame();
         self.stats.uploaded_this_frame = 0;
     }
 
@@ -149,28 +354,19 @@ impl TilePool {
         self.options.uploads_per_frame = n;
     }
 
-    /// The slot of a resident tile.
-    pub fn slot(&self, key: TileKey) -> Option<u32> {
-        self.slot_of.get(&key).copied()
+    /// Where a resident tile is.
+    pub fn resident(&self, key: TileKey) -> Option<&Resident> {
+        self.residency.get(key)
     }
 
-    /// The ECEF centre of a resident tile's vertices.
-    pub fn centre(&self, slot: u32) -> Option<DVec3> {
-        self.slots.get(slot as usize)?.map(|s| s.centre)
-    }
-
-    /// Whether the tile has a slot.
+    /// Whether the tile is resident.
     pub fn is_resident(&self, key: TileKey) -> bool {
-        self.slot_of.contains_key(&key)
+        self.residency.get(key).is_some()
     }
 
     /// Marks a resident tile as used this frame (it will not be evicted this frame).
     pub fn touch(&mut self, key: TileKey) {
-        if let Some(&s) = self.slot_of.get(&key)
-            && let Some(slot) = self.slots[s as usize].as_mut()
-        {
-            slot.last_used = self.frame;
-        }
+        self.residency.touch(key);
     }
 
     /// Whether another upload fits in this frame's budget.
@@ -178,33 +374,52 @@ impl TilePool {
         self.stats.uploaded_this_frame < self.options.uploads_per_frame
     }
 
-    /// Uploads a tile into a free or least-recently-used slot. Returns the slot and the tile
-    /// evicted to make room, or `None` if the frame's budget is spent or every slot is in use
-    /// this frame (the pool is too small for the view: the caller should lower detail).
+    /// Uploads a tile, evicting least recently used tiles to make room (pushed to `evicted`,
+    /// also when the upload then fails). Returns its slot, or `None` if the frame's budget is
+    /// spent, the data is malformed, or everything that could make room is in use this frame
+    /// (the pool is too small for the view: the caller should lower detail).
     pub fn upload(
         &mut self,
         queue: &wgpu::Queue,
         key: TileKey,
         mesh: &TileMesh,
         colour: &ColourImage,
-    ) -> Option<Upload> {
-        if let Some(slot) = self.slot(key) {
-            return Some(Upload {
-                slot,
-                evicted: None,
-            });
+        evicted: &mut Vec<TileKey>,
+    ) -> Option<u32> {
+        if let Some(r) = self.residency.get(key) {
+            return Some(r.slot);
         }
+        let n_vertices = mesh.vertices.len() as u32;
         if !self.can_upload()
             || colour.size != COLOUR_SIZE
-            || mesh.vertices.len() != VERTICES_PER_TILE as usize
+            || mesh.indices.iter().any(|&i| i >= n_vertices)
         {
             return None;
         }
-        let (slot, evicted) = self.take_slot()?;
+        let before = evicted.len();
+        let placed = self.residency.place(
+            key,
+            n_vertices,
+            mesh.indices.len() as u32,
+            mesh.centre,
+            evicted,
+        );
+        self.stats.evicted_total += (evicted.len() - before) as u64;
+        let r = placed?;
         queue.write_buffer(
             &self.vertex_buffer,
-            u64::from(slot) * VERTEX_BYTES,
+            u64::from(r.vertices.start) * VERTEX_BYTES,
             bytemuck::cast_slice(&mesh.vertices),
+        );
+        queue.write_buffer(
+            &self.slot_buffer,
+            u64::from(r.vertices.start) * 4,
+            bytemuck::cast_slice(&vec![r.slot; mesh.vertices.len()]),
+        );
+        queue.write_buffer(
+            &self.index_buffer,
+            u64::from(r.indices.start) * 4,
+            bytemuck::cast_slice(&mesh.indices),
         );
         for (level, pixels) in colour.mips.iter().enumerate().take(MIP_LEVELS as usize) {
             let size = COLOUR_SIZE >> level;
@@ -215,7 +430,7 @@ impl TilePool {
                     origin: wgpu::Origin3d {
                         x: 0,
                         y: 0,
-                        z: slot,
+                        z: r.slot,
                     },
                     aspect: wgpu::TextureAspect::All,
                 },
@@ -232,39 +447,18 @@ impl TilePool {
                 },
             );
         }
-        self.slots[slot as usize] = Some(Slot {
-            key,
-            centre: mesh.centre,
-            last_used: self.frame,
-        });
-        self.slot_of.insert(key, slot);
         self.stats.uploaded_this_frame += 1;
         self.stats.uploaded_total += 1;
-        Some(Upload { slot, evicted })
-    }
-
-    /// A free slot, or the least recently used one not used this frame (with its old tile).
-    fn take_slot(&mut self) -> Option<(u32, Option<TileKey>)> {
-        if let Some(s) = self.free.pop() {
-            return Some((s, None));
-        }
-        let (index, victim) = self
-            .slots
-            .iter()
-            .enumerate()
-            .filter_map(|(i, s)| s.map(|s| (i, s)))
-            .filter(|(_, s)| s.last_used < self.frame)
-            .min_by_key(|(_, s)| s.last_used)?;
-        self.slot_of.remove(&victim.key);
-        self.slots[index] = None;
-        self.stats.evicted_total += 1;
-        Some((index as u32, Some(victim.key)))
+        Some(r.slot)
     }
 
     /// Counters.
     pub fn stats(&self) -> PoolStats {
+        let (v, i) = self.residency.ranges();
         PoolStats {
-            resident: self.slot_of.len() as u32,
+            resident: self.residency.len() as u32,
+            vertices_used: v.used(),
+            indices_used: i.used(),
             ..self.stats
         }
     }
@@ -274,8 +468,12 @@ impl TilePool {
         self.options.slots
     }
 
-    pub(crate) fn vertex_buffer(&self) -> &wgpu::Buffer {
-        &self.vertex_buffer
+    pub(crate) fn vertex_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.vertex_buffer, &self.slot_buffer)
+    }
+
+    pub(crate) fn index_buffer(&self) -> &wgpu::Buffer {
+        &self.index_buffer
     }
 
     pub(crate) fn colour_view(&self) -> &wgpu::TextureView {
@@ -283,7 +481,74 @@ impl TilePool {
     }
 }
 
-// The shader's `TerrainVertex` is 16 bytes: vec3<f32> then u32.
-const _: () = assert!(
-    size_of::<globus_terrain::TerrainVertex>() as u64 * VERTICES_PER_TILE as u64 == VERTEX_BYTES
-);
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn key(x: u32) -> TileKey {
+        TileKey::new(10, x, 7)
+    }
+
+    #[test]
+    fn slots_are_reused_least_recently_used_first() {
+        let mut r = Residency::new(3, 10_000, 10_000);
+        let mut evicted = Vec::new();
+        for x in 0..3 {
+            r.begin_frame();
+            assert!(
+                r.place(key(x), 100, 300, DVec3::ZERO, &mut evicted)
+                    .is_some()
+            );
+        }
+        r.begin_frame();
+        r.touch(key(0));
+        // Full: the new tile takes the slot of key(1), the oldest not drawn this frame.
+        let placed = r.place(key(9), 100, 300, DVec3::ZERO, &mut evicted);
+        assert!(placed.is_some());
+        assert_eq!(evicted, vec![key(1)]);
+        assert!(r.get(key(1)).is_none() && r.get(key(0)).is_some());
+        assert_eq!(r.len(), 3);
+    }
+
+    #[test]
+    fn a_large_mesh_evicts_small_ones_until_it_fits_but_never_this_frames() {
+        let mut r = Residency::new(16, 1_000, 10_000);
+        let mut evicted = Vec::new();
+        r.begin_frame();
+        for x in 0..10 {
+            assert!(
+                r.place(key(x), 100, 10, DVec3::ZERO, &mut evicted)
+                    .is_some()
+            );
+        }
+        assert_eq!(r.ranges().0.used(), 1_000);
+        r.begin_frame();
+        for x in 5..10 {
+            r.touch(key(x));
+        }
+        // 450 vertices: five old tiles must go (4 would leave 400 free).
+        let placed = r
+            .place(key(20), 450, 10, DVec3::ZERO, &mut evicted)
+            .expect("fits after evicting the old tiles");
+        assert_eq!(placed.vertices.len(), 450);
+        assert_eq!(evicted.len(), 5);
+        assert!(evicted.iter().all(|k| k.x() < 5), "{evicted:?}");
+        // Nothing left to evict: the next large one fails and leaves the books balanced.
+        evicted.clear();
+        assert!(
+            r.place(key(21), 200, 10, DVec3::ZERO, &mut evicted)
+                .is_none()
+        );
+        assert!(evicted.is_empty());
+        assert_eq!(r.len(), 6);
+        assert_eq!(r.ranges().0.used(), 950);
+        assert_eq!(r.ranges().1.used(), 60);
+        // A mesh larger than the whole buffer is refused without evicting anything.
+        r.begin_frame();
+        assert!(
+            r.place(key(22), 1_001, 10, DVec3::ZERO, &mut evicted)
+                .is_none()
+        );
+        assert!(evicted.is_empty());
+    }
+}

@@ -15,6 +15,6 @@ mod source;
 
 pub use cache::LruCache;
 pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
-pub use procedural::{ProceduralSource, child_bounds};
+pub use procedural::ProceduralSource;
 pub use scheduler::{Scheduler, SchedulerStats};
-pub use source::{SourceError, TerrainData, TerrainSource, TileSource};
+pub use source::{SourceError, TerrainData, TerrainSource, TileSource, child_bounds};

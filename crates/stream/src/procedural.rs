@@ -1,9 +1,8 @@
 //! The procedural planet as a [`TileSource`].
 
 use globus_geo::Ellipsoid;
-use globus_terrain::grid::MESH_SEGMENTS;
-use globus_terrain::{ProceduralPlanet, TerrainTile, TileMesh};
-use globus_tiling::{TileBounds, TileKey, TilingScheme};
+use globus_terrain::{MeshOptions, ProceduralPlanet, TerrainTile};
+use globus_tiling::{TileKey, TilingScheme};
 
 use crate::{SourceError, TerrainData, TerrainSource, TileSource};
 
@@ -13,6 +12,7 @@ pub struct ProceduralSource {
     occluder: Ellipsoid,
     max_level: u8,
     name: String,
+    mesh_options: MeshOptions,
 }
 
 impl ProceduralSource {
@@ -26,6 +26,7 @@ impl ProceduralSource {
             occluder,
             max_level: max_level.min(globus_tiling::TileKey::MAX_LEVEL),
             name: format!("procedural planet (seed {seed})"),
+            mesh_options: MeshOptions::default(),
         }
     }
 
@@ -36,52 +37,19 @@ impl ProceduralSource {
 
     /// Builds everything the engine needs from a generated tile.
     pub fn prepare(&self, tile: TerrainTile) -> TerrainData {
-        let ellipsoid = self.planet.ellipsoid();
-        let mesh = TileMesh::build(&tile, ellipsoid, &self.occluder);
-        let child_bounds = child_bounds(&tile, ellipsoid, &self.occluder);
-        TerrainData {
+        TerrainData::build(
             tile,
-            mesh,
-            child_bounds,
-        }
+            self.planet.ellipsoid(),
+            &self.occluder,
+            &self.mesh_options,
+        )
     }
-}
 
-/// Conservative bounds of the four children from the parent's heights in each quadrant:
-/// children stay within the parent's geometric error of its mesh, and their skirts hang a
-/// few errors lower.
-pub fn child_bounds(
-    tile: &TerrainTile,
-    ellipsoid: &Ellipsoid,
-    occluder: &Ellipsoid,
-) -> [TileBounds; 4] {
-    let half = (MESH_SEGMENTS / 2) as i32;
-    let Some(children) = tile.key.children() else {
-        let b = TileBounds::from_rect(
-            ellipsoid,
-            occluder,
-            &tile.rect,
-            tile.min_height_m,
-            tile.max_height_m,
-        );
-        return [b; 4];
-    };
-    let spacing_m = tile.rect.height() / f64::from(MESH_SEGMENTS) * ellipsoid.mean_radius();
-    children.map(|child| {
-        let (qx, qy) = ((child.x() & 1) as i32, (child.y() & 1) as i32);
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for j in qy * half..=(qy + 1) * half {
-            for i in qx * half..=(qx + 1) * half {
-                let h = f64::from(tile.height_at(i, j));
-                lo = lo.min(h);
-                hi = hi.max(h);
-            }
-        }
-        let margin = tile.geometric_error_m;
-        let skirt = 4.0 * tile.geometric_error_m + 0.02 * spacing_m;
-        let rect = TilingScheme::Geographic.rect(child);
-        TileBounds::from_rect(ellipsoid, occluder, &rect, lo - margin - skirt, hi + margin)
-    })
+    /// Cuts meshes with `options` instead of the default.
+    pub fn with_mesh_options(mut self, options: MeshOptions) -> Self {
+        self.mesh_options = options;
+        self
+    }
 }
 
 impl TileSource for ProceduralSource {

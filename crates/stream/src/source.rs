@@ -1,7 +1,8 @@
 //! The [`TileSource`] trait: where tiles come from.
 
 use globus_geo::Ellipsoid;
-use globus_terrain::{TerrainTile, TileMesh};
+use globus_terrain::grid::MESH_SEGMENTS;
+use globus_terrain::{MeshOptions, TerrainTile, TileMesh};
 use globus_tiling::{TileBounds, TileKey, TilingScheme};
 
 /// Why a tile could not be loaded. Every error names the tile and the source.
@@ -67,8 +68,64 @@ pub struct TerrainData {
 }
 
 impl TerrainData {
+    /// Cuts the tile's mesh with `options`, folds the error the cut adds into the tile's
+    /// geometric error (so LOD selection sees the mesh that is drawn), and bounds the
+    /// children. Every terrain source builds its tiles through here.
+    pub fn build(
+        mut tile: TerrainTile,
+        ellipsoid: &Ellipsoid,
+        occluder: &Ellipsoid,
+        options: &MeshOptions,
+    ) -> Self {
+        let mesh = TileMesh::build(&tile, ellipsoid, occluder, options);
+        tile.geometric_error_m = mesh.geometric_error_m;
+        let child_bounds = child_bounds(&tile, ellipsoid, occluder);
+        Self {
+            tile,
+            mesh,
+            child_bounds,
+        }
+    }
+
     /// Bytes held.
     pub fn byte_size(&self) -> usize {
         self.tile.byte_size() + self.mesh.byte_size() + std::mem::size_of::<Self>()
     }
+}
+
+/// Conservative bounds of the four children from the parent's heights in each quadrant:
+/// children stay within the parent's geometric error of its mesh, and their skirts hang a
+/// few errors lower.
+pub fn child_bounds(
+    tile: &TerrainTile,
+    ellipsoid: &Ellipsoid,
+    occluder: &Ellipsoid,
+) -> [TileBounds; 4] {
+    let half = (MESH_SEGMENTS / 2) as i32;
+    let Some(children) = tile.key.children() else {
+        let b = TileBounds::from_rect(
+            ellipsoid,
+            occluder,
+            &tile.rect,
+            tile.min_height_m,
+            tile.max_height_m,
+        );
+        return [b; 4];
+    };
+    let spacing_m = tile.rect.height() / f64::from(MESH_SEGMENTS) * ellipsoid.mean_radius();
+    children.map(|child| {
+        let (qx, qy) = ((child.x() & 1) as i32, (child.y() & 1) as i32);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for j in qy * half..=(qy + 1) * half {
+            for i in qx * half..=(qx + 1) * half {
+                let h = f64::from(tile.height_at(i, j));
+                lo = lo.min(h);
+                hi = hi.max(h);
+            }
+        }
+        let margin = tile.geometric_error_m;
+        let skirt = 4.0 * tile.geometric_error_m + 0.02 * spacing_m;
+        let rect = TilingScheme::Geographic.rect(child);
+        TileBounds::from_rect(ellipsoid, occluder, &rect, lo - margin - skirt, hi + margin)
+    })
 }

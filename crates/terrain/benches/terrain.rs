@@ -46,7 +46,7 @@ criterion_group!(more, noise_throughput);
 criterion_main!(benches, more, tilegen, adaptive);
 
 fn tiles(c: &mut Criterion) {
-    use globus_terrain::{ProceduralPlanet, TileMesh};
+    use globus_terrain::{MeshOptions, ProceduralPlanet, TileMesh};
     use globus_tiling::TileKey;
     let planet = ProceduralPlanet::new(1);
     for key in [
@@ -59,15 +59,21 @@ fn tiles(c: &mut Criterion) {
         });
     }
     let tile = planet.generate_tile(TileKey::new(12, 2_134, 1_000));
-    c.bench_function("build_mesh", |b| {
-        b.iter(|| {
-            black_box(TileMesh::build(
-                &tile,
-                &globus_geo::Ellipsoid::WGS84,
-                &globus_geo::Ellipsoid::WGS84,
-            ))
-        })
-    });
+    for (name, options) in [
+        ("build_mesh adaptive", MeshOptions::default()),
+        ("build_mesh full grid", MeshOptions::FULL_GRID),
+    ] {
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                black_box(TileMesh::build(
+                    &tile,
+                    &globus_geo::Ellipsoid::WGS84,
+                    &globus_geo::Ellipsoid::WGS84,
+                    &options,
+                ))
+            })
+        });
+    }
 }
 criterion_group!(tilegen, tiles);
 

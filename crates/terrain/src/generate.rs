@@ -409,7 +409,7 @@ fn mesh_deviation(heights_m: &[f32], fine: &[f64]) -> f64 {
                 for di in 0..=OVERSAMPLE {
                     let s = f64::from(di) / f64::from(OVERSAMPLE);
                     let t = f64::from(dj) / f64::from(OVERSAMPLE);
-                    let mesh = interpolate_in_cell(nw, ne, sw, se, s, t);
+                    let mesh = interpolate_in_cell(ci, cj, nw, ne, sw, se, s, t);
                     let f = fine[fine_index(ci * OVERSAMPLE + di, cj * OVERSAMPLE + dj)];
                     worst = worst.max((f - mesh).abs());
                 }

@@ -1,15 +1,18 @@
-//! The regular grid every terrain tile uses: vertex order, skirts and triangulation.
+//! The grid every terrain tile is sampled on, and how the full-resolution mesh cuts its cells.
 //!
 //! ```text
-//!   i = 0 ............ 32      (west -> east)        vertex index = j * 33 + i
-//! j=0  +----+----+----+                              (1089 grid vertices)
-//!      | \  | \  |    |        each cell is split along its north-east to
-//!      |  \ |  \ |    |        south-west diagonal: (a, c, b) and (b, c, d)
-//!      +----+----+----+        with a = NW, b = NE, c = SW, d = SE
-//!  :
-//! j=32 +----+----+----+        then 4 x 33 skirt vertices, one below each edge vertex:
-//!  (north -> south)            north edge (i = 0..32), south edge, west edge (j = 0..32), east edge
+//!   i = 0 ............ 32      (west -> east)        sample (i, j), 33 x 33 per tile
+//! j=0  +----+----+----+
+//!      | \  |  / | \  |        cell (i, j) is cut along its north-west to south-east
+//!      |  \ | /  |  \ |        diagonal when i + j is even and along the north-east to
+//!      +----+----+----+        south-west one when odd: the finest level of the
+//!  :                           right-triangle hierarchy (see [`crate::adaptive::Rtin`])
+//! j=32 +----+----+----+        that tile meshes are cut from
+//!  (north -> south)
 //! ```
+//!
+//! Tile meshes keep a subset of these samples (an adaptive mesh with an error bound, see
+//! [`crate::TileMesh`]); the full grid is the mesh with every sample kept.
 //!
 //! Height grids carry one extra sample on every side (35 x 35, see [`HEIGHT_GRID_SIDE`]) so
 //! that normals at tile edges use the neighbour's heights and are continuous across tiles.
@@ -19,101 +22,40 @@
 
 /// Cells per tile side.
 pub const MESH_SEGMENTS: u32 = 32;
-/// Vertices per tile side.
+/// Samples per tile side.
 pub const MESH_SIDE: u32 = MESH_SEGMENTS + 1;
-/// Grid vertices (without skirts).
-pub const GRID_VERTICES: u32 = MESH_SIDE * MESH_SIDE;
-/// Skirt vertices, one per edge vertex on each of the four edges.
-pub const SKIRT_VERTICES: u32 = 4 * MESH_SIDE;
-/// All vertices of a tile.
-pub const VERTICES_PER_TILE: u32 = GRID_VERTICES + SKIRT_VERTICES;
-/// Samples per side of a tile's height grid: the vertices plus one border sample each side.
+/// Samples per side of a tile's height grid: the mesh samples plus one border sample each side.
 pub const HEIGHT_GRID_SIDE: usize = MESH_SIDE as usize + 2;
 /// Colour texels per tile side.
 pub const COLOUR_SIZE: u32 = 128;
 
-/// Which edge a skirt vertex hangs from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Edge {
-    /// j = 0.
-    North,
-    /// j = 32.
-    South,
-    /// i = 0.
-    West,
-    /// i = 32.
-    East,
+/// Whether the full-resolution mesh cuts cell (`i`, `j`) from its north-west to its
+/// south-east corner (else from north-east to south-west).
+pub const fn cell_diagonal_is_nw_se(i: i32, j: i32) -> bool {
+    (i + j).rem_euclid(2) == 0
 }
 
-/// Where a vertex of the tile layout sits: its grid column and row, and whether it is the
-/// skirt vertex below that grid vertex.
-pub fn vertex_grid_position(index: u32) -> (u32, u32, bool) {
-    if index < GRID_VERTICES {
-        return (index % MESH_SIDE, index / MESH_SIDE, false);
-    }
-    let s = index - GRID_VERTICES;
-    let (edge, k) = (s / MESH_SIDE, s % MESH_SIDE);
-    let (i, j) = match edge {
-        0 => (k, 0),
-        1 => (k, MESH_SEGMENTS),
-        2 => (0, k),
-        _ => (MESH_SEGMENTS, k),
-    };
-    (i, j, true)
-}
-
-/// The index of the skirt vertex at position `k` along `edge`.
-pub fn skirt_index(edge: Edge, k: u32) -> u32 {
-    let e = match edge {
-        Edge::North => 0,
-        Edge::South => 1,
-        Edge::West => 2,
-        Edge::East => 3,
-    };
-    GRID_VERTICES + e * MESH_SIDE + k
-}
-
-/// Triangle list indices of the grid and skirts, counter-clockwise seen from outside.
-pub fn triangle_indices() -> Vec<u32> {
-    let g = |i: u32, j: u32| j * MESH_SIDE + i;
-    let mut idx = Vec::with_capacity(index_count() as usize);
-    for j in 0..MESH_SEGMENTS {
-        for i in 0..MESH_SEGMENTS {
-            let (a, b, c, d) = (g(i, j), g(i + 1, j), g(i, j + 1), g(i + 1, j + 1));
-            idx.extend_from_slice(&[a, c, b, b, c, d]);
+/// Height of the full-resolution mesh inside cell (`i`, `j`) at fractions (`s` east, `t`
+/// south) of the cell, given its corner heights. This is what the GPU draws where every
+/// sample is kept, so geometric error is measured against it.
+#[allow(clippy::too_many_arguments)]
+pub fn interpolate_in_cell(
+    i: i32,
+    j: i32,
+    nw: f64,
+    ne: f64,
+    sw: f64,
+    se: f64,
+    s: f64,
+    t: f64,
+) -> f64 {
+    if cell_diagonal_is_nw_se(i, j) {
+        if t >= s {
+            nw + t * (sw - nw) + s * (se - sw)
+        } else {
+            nw + s * (ne - nw) + t * (se - ne)
         }
-    }
-    for k in 0..MESH_SEGMENTS {
-        // Walls facing north and east: (g0, g1, s0), (g1, s1, s0).
-        for (edge, g0, g1) in [
-            (Edge::North, g(k, 0), g(k + 1, 0)),
-            (Edge::East, g(MESH_SEGMENTS, k), g(MESH_SEGMENTS, k + 1)),
-        ] {
-            let (s0, s1) = (skirt_index(edge, k), skirt_index(edge, k + 1));
-            idx.extend_from_slice(&[g0, g1, s0, g1, s1, s0]);
-        }
-        // Walls facing south and west: (g0, s0, g1), (g1, s0, s1).
-        for (edge, g0, g1) in [
-            (Edge::South, g(k, MESH_SEGMENTS), g(k + 1, MESH_SEGMENTS)),
-            (Edge::West, g(0, k), g(0, k + 1)),
-        ] {
-            let (s0, s1) = (skirt_index(edge, k), skirt_index(edge, k + 1));
-            idx.extend_from_slice(&[g0, s0, g1, g1, s0, s1]);
-        }
-    }
-    idx
-}
-
-/// Number of indices [`triangle_indices`] returns.
-pub const fn index_count() -> u32 {
-    MESH_SEGMENTS * MESH_SEGMENTS * 6 + 4 * MESH_SEGMENTS * 6
-}
-
-/// Height of the mesh surface inside cell (`i`, `j`) at fractions (`s` east, `t` south) of the
-/// cell, given its corner heights, following the triangulation above. This is what the GPU
-/// draws, so geometric error is measured against it.
-pub fn interpolate_in_cell(nw: f64, ne: f64, sw: f64, se: f64, s: f64, t: f64) -> f64 {
-    if s + t <= 1.0 {
+    } else if s + t <= 1.0 {
         nw + s * (ne - nw) + t * (sw - nw)
     } else {
         se + (1.0 - s) * (sw - se) + (1.0 - t) * (ne - se)
@@ -123,46 +65,41 @@ pub fn interpolate_in_cell(nw: f64, ne: f64, sw: f64, se: f64, s: f64, t: f64) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::adaptive::{HeightGrid, Rtin};
 
     #[test]
-    fn every_vertex_is_used_and_indices_are_in_range() {
-        let idx = triangle_indices();
-        assert_eq!(idx.len() as u32, index_count());
-        let mut used = vec![false; VERTICES_PER_TILE as usize];
-        for i in idx {
-            used[i as usize] = true;
+    fn interpolation_matches_corners_and_diagonals() {
+        for (i, j) in [(0, 0), (1, 0), (3, 5), (4, 4)] {
+            let h = |s, t| interpolate_in_cell(i, j, 1.0, 2.0, 3.0, 4.0, s, t);
+            assert_eq!(h(0.0, 0.0), 1.0);
+            assert_eq!(h(1.0, 0.0), 2.0);
+            assert_eq!(h(0.0, 1.0), 3.0);
+            assert_eq!(h(1.0, 1.0), 4.0);
         }
-        assert!(used.iter().all(|u| *u));
+        // On the cut diagonal the two triangles agree; across it the surface kinks.
+        let h = |i, s, t| interpolate_in_cell(i, 0, 0.0, 0.0, 0.0, 1.0, s, t);
+        assert!((h(0, 0.5, 0.5) - 0.5).abs() < 1e-12, "NW-SE cut");
+        assert!(h(1, 0.5, 0.5).abs() < 1e-12, "NE-SW cut: SE raised alone");
     }
 
+    /// The diagonals here are the ones the right-triangle hierarchy produces: a mesh that keeps
+    /// every sample interpolates exactly as [`interpolate_in_cell`] says.
     #[test]
-    fn skirt_positions_round_trip() {
-        for (edge, k) in [
-            (Edge::North, 3),
-            (Edge::South, 32),
-            (Edge::West, 0),
-            (Edge::East, 17),
-        ] {
-            let (i, j, skirt) = vertex_grid_position(skirt_index(edge, k));
-            assert!(skirt);
-            let expected = match edge {
-                Edge::North => (k, 0),
-                Edge::South => (k, 32),
-                Edge::West => (0, k),
-                Edge::East => (32, k),
-            };
-            assert_eq!((i, j), expected);
+    fn diagonals_match_the_full_rtin_mesh() {
+        let side = MESH_SIDE as usize;
+        let grid = HeightGrid::new(side, vec![0.0; side * side]).expect("grid");
+        let mesh = Rtin::new(&grid).mesh_with(-1.0, 1);
+        assert_eq!(mesh.triangles.len(), 2 * 32 * 32);
+        for t in &mesh.triangles {
+            let p = t.map(|k| mesh.vertices[k as usize]);
+            // The hypotenuse of a unit right triangle is the cell's cut diagonal.
+            let (a, b) = (0..3)
+                .map(|k| (p[k], p[(k + 1) % 3]))
+                .find(|(a, b)| a[0] != b[0] && a[1] != b[1])
+                .expect("a diagonal edge");
+            let (i, j) = (a[0].min(b[0]), a[1].min(b[1]));
+            let nw_se = (a[0] < b[0]) == (a[1] < b[1]);
+            assert_eq!(nw_se, cell_diagonal_is_nw_se(i32::from(i), i32::from(j)));
         }
-    }
-
-    #[test]
-    fn interpolation_matches_corners_and_diagonal() {
-        let h = |s, t| interpolate_in_cell(1.0, 2.0, 3.0, 4.0, s, t);
-        assert_eq!(h(0.0, 0.0), 1.0);
-        assert_eq!(h(1.0, 0.0), 2.0);
-        assert_eq!(h(0.0, 1.0), 3.0);
-        assert_eq!(h(1.0, 1.0), 4.0);
-        // On the NE-SW diagonal both triangles agree.
-        assert!((h(0.5, 0.5) - 2.5).abs() < 1e-12);
     }
 }

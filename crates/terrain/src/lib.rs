@@ -3,9 +3,9 @@
 //! * [`ProceduralPlanet`]: the default data source, an Earth-sized planet with oceans,
 //!   continents, mountain ranges and detail down to 0.15 m, deterministic for a seed.
 //! * [`TerrainTile`]: one tile's height grid (with a border), colour image and errors.
-//! * [`TileMesh`]: the tile's vertices relative to its own origin (f32) plus normals, skirts
-//!   and exact bounds, ready to upload.
-//! * [`grid`]: the vertex layout and triangulation every tile shares.
+//! * [`TileMesh`]: the tile's adaptive mesh (an error-bounded cut of its grid) with vertices
+//!   relative to its own origin (f32), normals, skirts and exact bounds, ready to upload.
+//! * [`grid`]: the sample grid every tile shares.
 //! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and greedy Delaunay plus
 //!   Kaiser's plane-deviance decimation).
 //! * [`quantized_mesh`]: Cesium's quantized-mesh-1.0, encoded and decoded (untrusted input).
@@ -22,6 +22,6 @@ mod planet;
 pub mod quantized_mesh;
 mod tile;
 
-pub use mesh::{TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
+pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
 pub use planet::{Fields, ProceduralPlanet, Relief};
 pub use tile::{ColourImage, TerrainTile};

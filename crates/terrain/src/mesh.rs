@@ -1,22 +1,31 @@
-//! [`TileMesh`]: a terrain tile's vertices in its own f32 frame, ready for the GPU.
+//! [`TileMesh`]: a terrain tile's adaptive mesh in its own f32 frame, ready for the GPU.
+//!
+//! The mesh keeps only the samples of the tile's 33 x 33 grid that its error bound needs: a
+//! right-triangle hierarchy ([`Rtin`]) cut at a vertical error of
+//! [`MeshOptions::error_fraction`] times the tile's geometric error, half of it for the
+//! heights and half for the curvature of the body between a triangle's corners (long
+//! triangles are split until their sagitta fits). The error the cut adds is measured and
+//! folded into [`TileMesh::geometric_error_m`], so LOD selection sees the mesh it draws.
 //!
 //! Positions are computed in f64 ECEF and stored as f32 offsets from the tile's centre, so
 //! nothing large ever reaches an f32: a level-20 tile spans about 20 m, where f32 resolves
 //! about 2 micrometres. Normals come from the height grid including its border ring, so they
 //! are continuous across tile edges, and are stored oct-encoded in 2 x 16 bits.
 //!
-//! Skirts hang below each edge by [`TileMesh::skirt_depth_m`], sized from the tile's geometric
-//! error so they close the largest crack that a neighbour up to two levels coarser can leave
-//! (Ulrich 2002; Zeitler 2015, section 4.10).
+//! Borders: neighbouring meshes need not share edge vertices (their own cuts, or other
+//! levels), so every edge carries a skirt hanging by [`TileMesh::skirt_depth_m`], sized from
+//! the geometric error so it closes the largest crack that a neighbour up to two levels
+//! coarser can leave (Ulrich 2002; Zeitler 2015, section 4.10; Cesium does the same).
 
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid};
 use globus_tiling::{TileBounds, TileKey};
 
 use crate::TerrainTile;
-use crate::grid::{MESH_SEGMENTS, MESH_SIDE, VERTICES_PER_TILE, vertex_grid_position};
+use crate::adaptive::{AdaptiveMesh, HeightGrid, Rtin};
+use crate::grid::{MESH_SEGMENTS, MESH_SIDE};
 
-/// One vertex as the GPU reads it (16 bytes).
+/// One vertex as the GPU reads it (20 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct TerrainVertex {
@@ -24,6 +33,32 @@ pub struct TerrainVertex {
     pub position: [f32; 3],
     /// Unit normal, oct-encoded: x in the low 16 bits, y in the high 16 bits, both snorm.
     pub normal_oct: u32,
+    /// Texture coordinates over the tile (0,0 north-west, 1,1 south-east), unorm16 x 2
+    /// (u in the low half).
+    pub uv: u32,
+}
+
+/// How tile meshes are cut.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshOptions {
+    /// Vertical error the mesh may add to the full grid, as a fraction of the tile's
+    /// geometric error; 0 keeps every grid sample.
+    pub error_fraction: f64,
+}
+
+impl Default for MeshOptions {
+    fn default() -> Self {
+        Self {
+            error_fraction: 0.25,
+        }
+    }
+}
+
+impl MeshOptions {
+    /// Every grid sample kept (the regular grid).
+    pub const FULL_GRID: Self = Self {
+        error_fraction: 0.0,
+    };
 }
 
 /// A tile's mesh data on the CPU.
@@ -33,12 +68,20 @@ pub struct TileMesh {
     pub key: TileKey,
     /// The tile's origin in ECEF: every vertex is relative to it.
     pub centre: DVec3,
-    /// [`VERTICES_PER_TILE`] vertices in [`crate::grid`] order.
+    /// The surface vertices, then one skirt vertex per edge vertex.
     pub vertices: Vec<TerrainVertex>,
+    /// Triangle list, counter-clockwise seen from outside; surface triangles first.
+    pub indices: Vec<u32>,
+    /// Triangles of the surface (the rest are skirt walls).
+    pub surface_triangles: u32,
     /// Exact bounds of all vertices, skirts included.
     pub bounds: TileBounds,
     /// How far skirts hang below the edges, metres.
     pub skirt_depth_m: f64,
+    /// Largest vertical distance, metres, this mesh adds to the full grid (measured).
+    pub cut_error_m: f64,
+    /// The tile's geometric error with the cut's added: what LOD selection should use.
+    pub geometric_error_m: f64,
 }
 
 /// Skirts reach this many times the tile's geometric error below its edges: a neighbour two
@@ -47,37 +90,56 @@ const SKIRT_ERROR_FACTOR: f64 = 6.0;
 
 impl TileMesh {
     /// Builds the mesh of `tile` on `ellipsoid`; `occluder` is the horizon-culling body.
-    pub fn build(tile: &TerrainTile, ellipsoid: &Ellipsoid, occluder: &Ellipsoid) -> Self {
+    pub fn build(
+        tile: &TerrainTile,
+        ellipsoid: &Ellipsoid,
+        occluder: &Ellipsoid,
+        options: &MeshOptions,
+    ) -> Self {
         let rect = tile.rect;
+        let n = f64::from(MESH_SEGMENTS);
         let lon_at = |i: i32| {
-            let t = f64::from(i) / f64::from(MESH_SEGMENTS);
+            let t = f64::from(i) / n;
             rect.west * (1.0 - t) + rect.east * t
         };
         let lat_at = |j: i32| {
-            let t = f64::from(j) / f64::from(MESH_SEGMENTS);
+            let t = f64::from(j) / n;
             rect.north * (1.0 - t) + rect.south * t
         };
         let position = |i: i32, j: i32, dh: f64| {
             let h = f64::from(tile.height_at(i, j)) + dh;
             ellipsoid.cartographic_to_ecef(Cartographic::new(lon_at(i), lat_at(j), h))
         };
-        let mesh_spacing_m = rect.height() / f64::from(MESH_SEGMENTS) * ellipsoid.mean_radius();
-        let skirt_depth_m = SKIRT_ERROR_FACTOR * tile.geometric_error_m + 0.02 * mesh_spacing_m;
-        let mut points = Vec::with_capacity(VERTICES_PER_TILE as usize);
-        let mut normals = Vec::with_capacity(VERTICES_PER_TILE as usize);
-        for v in 0..VERTICES_PER_TILE {
-            let (i, j, skirt) = vertex_grid_position(v);
-            let (i, j) = (i as i32, j as i32);
+        let spacing_m = rect.height() / n * ellipsoid.mean_radius();
+        let (adaptive, cut_error_m) = cut(tile, spacing_m, ellipsoid.mean_radius(), options);
+        let geometric_error_m = tile.geometric_error_m + cut_error_m;
+        let skirt_depth_m = SKIRT_ERROR_FACTOR * geometric_error_m + 0.02 * spacing_m;
+
+        let edges = adaptive.edge_vertices();
+        let surface = adaptive.vertices.len();
+        let skirt_count: usize = edges.iter().map(Vec::len).sum();
+        let mut grid_of = Vec::with_capacity(surface + skirt_count);
+        grid_of.extend(adaptive.vertices.iter().map(|&[i, j]| (i, j, false)));
+        for edge in &edges {
+            grid_of.extend(edge.iter().map(|&v| {
+                let [i, j] = adaptive.vertices[v as usize];
+                (i, j, true)
+            }));
+        }
+        let mut points = Vec::with_capacity(grid_of.len());
+        let mut normals = Vec::with_capacity(grid_of.len());
+        for &(i, j, skirt) in &grid_of {
+            let (i, j) = (i32::from(i), i32::from(j));
             points.push(position(i, j, if skirt { -skirt_depth_m } else { 0.0 }));
             let east = position(i + 1, j, 0.0) - position(i - 1, j, 0.0);
             let south = position(i, j + 1, 0.0) - position(i, j - 1, 0.0);
             let up = ellipsoid.geodetic_normal_from_lon_lat(lon_at(i), lat_at(j));
-            let n = south
+            let normal = south
                 .cross(east)
                 .try_normalize()
-                .filter(|n| n.dot(up) > 0.0)
+                .filter(|v| v.dot(up) > 0.0)
                 .unwrap_or(up);
-            normals.push(n);
+            normals.push(normal);
         }
         let bounds = TileBounds::from_points(ellipsoid, occluder, &rect, &points)
             .unwrap_or_else(|| TileBounds::from_rect(ellipsoid, occluder, &rect, 0.0, 0.0));
@@ -85,28 +147,118 @@ impl TileMesh {
         let vertices = points
             .iter()
             .zip(&normals)
-            .map(|(p, n)| {
+            .zip(&grid_of)
+            .map(|((p, normal), &(i, j, _))| {
                 let local = *p - centre;
                 TerrainVertex {
                     position: [local.x as f32, local.y as f32, local.z as f32],
-                    normal_oct: encode_oct_normal(*n),
+                    normal_oct: encode_oct_normal(*normal),
+                    uv: encode_uv(i, j),
                 }
             })
             .collect();
-        debug_assert_eq!(MESH_SIDE * MESH_SIDE + 4 * MESH_SIDE, VERTICES_PER_TILE);
+        let indices = triangles_with_skirts(&adaptive, &edges);
         Self {
             key: tile.key,
             centre,
             vertices,
+            indices,
+            surface_triangles: adaptive.triangles.len() as u32,
             bounds,
             skirt_depth_m,
+            cut_error_m,
+            geometric_error_m,
         }
     }
 
-    /// Bytes of vertex data.
+    /// Bytes of vertex and index data.
     pub fn byte_size(&self) -> usize {
-        self.vertices.len() * std::mem::size_of::<TerrainVertex>()
+        self.vertices.len() * std::mem::size_of::<TerrainVertex>() + self.indices.len() * 4
     }
+
+    /// Triangles, skirts included.
+    pub fn triangle_count(&self) -> u32 {
+        (self.indices.len() / 3) as u32
+    }
+}
+
+/// The tile's grid cut to `options`, and the vertical error the cut adds (heights plus the
+/// sagitta of the body under its longest triangle legs).
+fn cut(
+    tile: &TerrainTile,
+    spacing_m: f64,
+    radius_m: f64,
+    options: &MeshOptions,
+) -> (AdaptiveMesh, f64) {
+    let side = MESH_SIDE as usize;
+    let heights = (0..side * side)
+        .map(|k| tile.height_at((k % side) as i32, (k / side) as i32))
+        .collect();
+    let grid = match HeightGrid::new(side, heights) {
+        Ok(grid) => grid,
+        Err(e) => unreachable!("the tile grid is 2^5 + 1 samples: {e}"),
+    };
+    let budget = options.error_fraction * tile.geometric_error_m;
+    let rtin = Rtin::new(&grid);
+    if budget.is_nan() || budget <= 0.0 {
+        return (rtin.mesh_with(-1.0, 1), 0.0);
+    }
+    // Sagitta of a right triangle with legs of L cells (hypotenuse L sqrt 2): the body bulges
+    // (L s)^2 / (4 R) under its circumcircle. Allow half the budget for that.
+    let max_leg = ((2.0 * radius_m * budget).sqrt() / spacing_m)
+        .floor()
+        .clamp(1.0, f64::from(MESH_SEGMENTS)) as u16;
+    let mesh = rtin.mesh_with(budget * 0.5, max_leg);
+    // Longest edge (a right triangle's hypotenuse), grid cells.
+    let longest = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| {
+            let p = t.map(|k| mesh.vertices[k as usize]);
+            (0..3).map(move |k| {
+                let (a, b) = (p[k], p[(k + 1) % 3]);
+                f64::from(a[0].abs_diff(b[0])).hypot(f64::from(a[1].abs_diff(b[1])))
+            })
+        })
+        .fold(0.0, f64::max);
+    // Sagitta under the circumcircle (radius: half the hypotenuse). The full grid's own
+    // (one-cell triangles) is already part of the tile's error.
+    let sagitta = if longest > 1.5 {
+        (longest * spacing_m).powi(2) / (8.0 * radius_m)
+    } else {
+        0.0
+    };
+    let error = mesh.max_error(&grid) + sagitta;
+    (mesh, error)
+}
+
+/// The surface triangles, then skirt walls under each edge facing outwards.
+fn triangles_with_skirts(mesh: &AdaptiveMesh, edges: &[Vec<u32>; 4]) -> Vec<u32> {
+    let skirt_count: usize = edges.iter().map(Vec::len).sum();
+    let mut idx = Vec::with_capacity(mesh.triangles.len() * 3 + skirt_count * 6);
+    idx.extend(mesh.triangles.iter().flatten());
+    let mut skirt = mesh.vertices.len() as u32;
+    // Edges are sorted north (west to east), east (north to south), south, west: walls on the
+    // north and east edges wind (g0, g1, s0), those on the south and west (g0, s0, g1).
+    for (e, edge) in edges.iter().enumerate() {
+        for k in 1..edge.len() as u32 {
+            let (g0, g1) = (edge[k as usize - 1], edge[k as usize]);
+            let (s0, s1) = (skirt + k - 1, skirt + k);
+            if e < 2 {
+                idx.extend_from_slice(&[g0, g1, s0, g1, s1, s0]);
+            } else {
+                idx.extend_from_slice(&[g0, s0, g1, g1, s0, s1]);
+            }
+        }
+        skirt += edge.len() as u32;
+    }
+    idx
+}
+
+/// Grid sample (`i`, `j`) as unorm16 texture coordinates.
+fn encode_uv(i: u16, j: u16) -> u32 {
+    let q = |k: u16| (f64::from(k) / f64::from(MESH_SEGMENTS) * 65535.0).round() as u32;
+    q(i) | (q(j) << 16)
 }
 
 /// Oct-encodes a unit vector (Cigolle et al., "A Survey of Efficient Representations for
@@ -155,7 +307,7 @@ fn sign(v: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::ProceduralPlanet;
-    use crate::grid::triangle_indices;
+    use crate::adaptive::for_each_sample_in;
 
     #[test]
     fn oct_normals_round_trip() {
@@ -170,11 +322,26 @@ mod tests {
         }
     }
 
-    fn mesh(key: TileKey) -> (TerrainTile, TileMesh) {
+    fn mesh_with(key: TileKey, options: &MeshOptions) -> (TerrainTile, TileMesh) {
         let planet = ProceduralPlanet::new(1);
         let tile = planet.generate_tile(key);
-        let m = TileMesh::build(&tile, &Ellipsoid::WGS84, &Ellipsoid::WGS84);
+        let m = TileMesh::build(&tile, &Ellipsoid::WGS84, &Ellipsoid::WGS84, options);
         (tile, m)
+    }
+
+    fn mesh(key: TileKey) -> (TerrainTile, TileMesh) {
+        mesh_with(key, &MeshOptions::default())
+    }
+
+    fn point(m: &TileMesh, i: u32) -> DVec3 {
+        let v = m.vertices[i as usize].position;
+        m.centre + DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
+    }
+
+    fn grid_position(m: &TileMesh, i: u32) -> [u16; 2] {
+        let uv = m.vertices[i as usize].uv;
+        let k = |q: u32| (f64::from(q) / 65535.0 * f64::from(MESH_SEGMENTS)).round() as u16;
+        [k(uv & 0xffff), k(uv >> 16)]
     }
 
     #[test]
@@ -184,64 +351,129 @@ mod tests {
             TileKey::new(2, 3, 0),
             TileKey::new(16, 70_000, 16_000),
         ] {
-            let (_, m) = mesh(key);
-            let p = |i: u32| {
-                let v = m.vertices[i as usize].position;
-                m.centre + DVec3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
-            };
-            let tile_up = m.centre.normalize();
-            let mut grid_up = 0;
-            let mut walls_out = 0;
-            for tri in triangle_indices().chunks_exact(3) {
-                let (a, b, c) = (p(tri[0]), p(tri[1]), p(tri[2]));
-                let n = (b - a).cross(c - a);
-                if n.length() < 1e-9 {
-                    continue; // degenerate (pole)
+            for options in [MeshOptions::default(), MeshOptions::FULL_GRID] {
+                let (_, m) = mesh_with(key, &options);
+                let tile_up = m.centre.normalize();
+                let mut walls = 0;
+                for (t, tri) in m.indices.chunks_exact(3).enumerate() {
+                    let (a, b, c) = (point(&m, tri[0]), point(&m, tri[1]), point(&m, tri[2]));
+                    let n = (b - a).cross(c - a);
+                    if n.length() < 1e-9 {
+                        continue; // degenerate (pole)
+                    }
+                    if t as u32 >= m.surface_triangles {
+                        // Walls face away from the tile centre.
+                        let mid = (a + b + c) / 3.0;
+                        let out = (mid - m.centre) - tile_up * (mid - m.centre).dot(tile_up);
+                        assert!(n.dot(out) > 0.0, "{key:?}: skirt faces inwards");
+                        walls += 1;
+                    } else {
+                        assert!(n.dot(a.normalize()) > 0.0, "{key:?}: triangle faces down");
+                    }
                 }
-                let is_skirt = tri.iter().any(|&i| i >= crate::grid::GRID_VERTICES);
-                if is_skirt {
-                    // Walls face away from the tile centre.
-                    let mid = (a + b + c) / 3.0;
-                    let out = (mid - m.centre) - tile_up * (mid - m.centre).dot(tile_up);
-                    assert!(n.dot(out) > 0.0, "{key:?}: skirt faces inwards");
-                    walls_out += 1;
-                } else {
-                    assert!(
-                        n.dot(a.normalize()) > 0.0,
-                        "{key:?}: grid triangle faces down"
-                    );
-                    grid_up += 1;
-                }
+                assert!(walls >= 8, "{key:?}: {walls} skirt walls");
             }
-            assert!(grid_up > 1900 && walls_out >= 192, "{grid_up} {walls_out}");
+            let (_, full) = mesh_with(key, &MeshOptions::FULL_GRID);
+            assert_eq!(full.surface_triangles, 2 * 32 * 32);
+            assert_eq!(full.cut_error_m, 0.0);
         }
+    }
+
+    /// Every grid sample's true position against the drawn surface above or below it: the
+    /// vertical gap stays within the mesh's geometric error, curvature included (a flat ocean
+    /// tile at level 4 is cut into few triangles, and would sag kilometres without the leg
+    /// limit).
+    #[test]
+    fn drawn_surface_stays_within_the_geometric_error() {
+        let e = Ellipsoid::WGS84;
+        for key in [
+            TileKey::new(4, 5, 6),
+            TileKey::new(7, 140, 40),
+            TileKey::new(12, 2_170, 560),
+            TileKey::new(17, 70_000, 16_000),
+        ] {
+            let (tile, m) = mesh(key);
+            assert!(m.cut_error_m <= 0.25 * tile.geometric_error_m * (1.0 + 1e-6) + 1e-4);
+            let rect = tile.rect;
+            let n = f64::from(MESH_SEGMENTS);
+            let truth = |i: usize, j: usize| {
+                let (lon, lat) = (
+                    rect.west + (rect.east - rect.west) * i as f64 / n,
+                    rect.north + (rect.south - rect.north) * j as f64 / n,
+                );
+                let h = f64::from(tile.height_at(i as i32, j as i32));
+                (
+                    e.cartographic_to_ecef(Cartographic::new(lon, lat, h)),
+                    e.geodetic_normal_from_lon_lat(lon, lat),
+                )
+            };
+            let mut worst = 0.0f64;
+            for tri in m.indices[..m.surface_triangles as usize * 3].chunks_exact(3) {
+                let g = [tri[0], tri[1], tri[2]].map(|v| grid_position(&m, v));
+                let p = [tri[0], tri[1], tri[2]].map(|v| point(&m, v));
+                for_each_sample_in(g, |i, j, w| {
+                    let drawn = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
+                    let (true_p, up) = truth(i, j);
+                    worst = worst.max((true_p - drawn).dot(up).abs());
+                });
+            }
+            assert!(
+                worst <= m.geometric_error_m + 0.01,
+                "{key:?}: drawn surface {worst:.3} m from the samples, error {:.3} m",
+                m.geometric_error_m
+            );
+        }
+    }
+
+    #[test]
+    fn adaptive_meshes_drop_samples_where_the_ground_is_smooth() {
+        // Open ocean at level 9 and a mountain tile: the ocean keeps few samples.
+        let (_, ocean) = mesh(TileKey::new(9, 300, 260));
+        let (_, full) = mesh_with(TileKey::new(9, 300, 260), &MeshOptions::FULL_GRID);
+        assert!(
+            ocean.surface_triangles * 4 < full.surface_triangles,
+            "ocean: {} of {} triangles",
+            ocean.surface_triangles,
+            full.surface_triangles
+        );
     }
 
     #[test]
     fn bounds_contain_every_vertex_and_offsets_are_small() {
         let (tile, m) = mesh(TileKey::new(18, 140_000, 70_000));
-        for v in &m.vertices {
-            let p = m.centre
-                + DVec3::new(
-                    f64::from(v.position[0]),
-                    f64::from(v.position[1]),
-                    f64::from(v.position[2]),
-                );
-            assert!(m.bounds.obb.contains(p, 1e-3));
-            assert!(DVec3::from_array(v.position.map(f64::from)).length() < 200.0);
+        for i in 0..m.vertices.len() as u32 {
+            assert!(m.bounds.obb.contains(point(&m, i), 1e-3));
+            let v = m.vertices[i as usize].position;
+            assert!(DVec3::from_array(v.map(f64::from)).length() < 200.0);
         }
         assert!(m.skirt_depth_m > 6.0 * tile.geometric_error_m);
+        assert!(m.indices.iter().all(|&i| (i as usize) < m.vertices.len()));
     }
 
     #[test]
     fn normals_are_continuous_across_tiles() {
         let (_, a) = mesh(TileKey::new(10, 1060, 250));
         let (_, b) = mesh(TileKey::new(10, 1061, 250));
-        for k in 0..MESH_SIDE {
-            let na =
-                decode_oct_normal(a.vertices[(k * MESH_SIDE + MESH_SEGMENTS) as usize].normal_oct);
-            let nb = decode_oct_normal(b.vertices[(k * MESH_SIDE) as usize].normal_oct);
-            assert!(na.dot(nb) > 0.9999, "edge normal {k}: {na} vs {nb}");
+        let edge = |m: &TileMesh, column: u16| -> Vec<(u16, DVec3)> {
+            (0..m.vertices.len() as u32)
+                .filter(|&v| grid_position(m, v)[0] == column)
+                .map(|v| {
+                    let n = decode_oct_normal(m.vertices[v as usize].normal_oct);
+                    (grid_position(m, v)[1], n)
+                })
+                .collect()
+        };
+        let (east, west) = (edge(&a, 32), edge(&b, 0));
+        let mut shared = 0;
+        for (row, na) in &east {
+            for (_, nb) in west.iter().filter(|(r, _)| r == row) {
+                assert!(
+                    na.dot(*nb) > 0.9999,
+                    "edge normal at row {row}: {na} vs {nb}"
+                );
+                shared += 1;
+            }
         }
+        assert!(shared >= 4, "{shared} shared edge samples");
     }
 }

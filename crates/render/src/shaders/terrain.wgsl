@@ -1,28 +1,23 @@
-// Terrain: one instanced draw over the shared tile grid. Vertex data is pulled from the
-// vertex pool by slot; positions are f32 offsets from the tile's centre, and each instance
-// carries the centre-to-eye offset computed in f64 on the CPU, so nothing large reaches f32.
+// Terrain: every tile's mesh from the shared vertex and index pools, all drawn by one
+// multi-draw-indirect. Positions are f32 offsets from the tile's centre; each vertex carries
+// its tile's slot, which gives the centre-to-eye offset computed in f64 on the CPU (so
+// nothing large reaches f32) and the layer of the colour texture array.
 
-struct TerrainVertex {
-    position: vec3<f32>,
-    normal_oct: u32,
+struct VsIn {
+    // Metres from the tile centre.
+    @location(0) position: vec3<f32>,
+    // Oct-encoded unit normal, snorm16 x 2.
+    @location(1) normal_oct: u32,
+    // Texture coordinates over the tile.
+    @location(2) uv: vec2<f32>,
+    // Pool slot of the vertex's tile.
+    @location(3) slot: u32,
 }
 
-struct TileInstance {
-    // Tile centre minus eye position, metres (f64 on the CPU, rounded once).
-    offset: vec3<f32>,
-    // Slot in the vertex pool and colour texture array.
-    slot: u32,
-}
-
-const MESH_SIDE: u32 = 33u;
-const GRID_VERTICES: u32 = 1089u;
-const VERTICES_PER_TILE: u32 = 1221u;
-const SEGMENTS: f32 = 32.0;
-
-@group(1) @binding(0) var<storage, read> vertices: array<TerrainVertex>;
-@group(1) @binding(1) var<storage, read> instances: array<TileInstance>;
-@group(1) @binding(2) var colours: texture_2d_array<f32>;
-@group(1) @binding(3) var colour_sampler: sampler;
+// Per slot: tile centre minus eye position, metres (f64 on the CPU, rounded once).
+@group(1) @binding(0) var<storage, read> offsets: array<vec4<f32>>;
+@group(1) @binding(1) var colours: texture_2d_array<f32>;
+@group(1) @binding(2) var colour_sampler: sampler;
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -32,33 +27,15 @@ struct VsOut {
     @location(3) @interpolate(flat) slot: u32,
 }
 
-// Grid column and row of a vertex (skirt vertices share their edge vertex's position in uv).
-fn grid_uv(index: u32) -> vec2<f32> {
-    if (index < GRID_VERTICES) {
-        return vec2<f32>(f32(index % MESH_SIDE), f32(index / MESH_SIDE)) / SEGMENTS;
-    }
-    let s = index - GRID_VERTICES;
-    let edge = s / MESH_SIDE;
-    let k = f32(s % MESH_SIDE);
-    switch edge {
-        case 0u: { return vec2<f32>(k, 0.0) / SEGMENTS; }
-        case 1u: { return vec2<f32>(k, SEGMENTS) / SEGMENTS; }
-        case 2u: { return vec2<f32>(0.0, k) / SEGMENTS; }
-        default: { return vec2<f32>(SEGMENTS, k) / SEGMENTS; }
-    }
-}
-
 @vertex
-fn vs_main(@builtin(vertex_index) index: u32, @builtin(instance_index) instance: u32) -> VsOut {
-    let tile = instances[instance];
-    let v = vertices[tile.slot * VERTICES_PER_TILE + index];
-    let eye_offset = tile.offset + v.position;
+fn vs_main(v: VsIn) -> VsOut {
+    let eye_offset = offsets[v.slot].xyz + v.position;
     var out: VsOut;
     out.clip = frame.clip_from_eye * vec4<f32>(eye_offset, 1.0);
-    out.uv = grid_uv(index);
+    out.uv = v.uv;
     out.normal = decode_oct(v.normal_oct);
     out.eye_offset = eye_offset;
-    out.slot = tile.slot;
+    out.slot = v.slot;
     return out;
 }
 

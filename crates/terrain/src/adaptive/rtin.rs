@@ -74,12 +74,22 @@ impl Rtin {
 
     /// The coarsest mesh of the hierarchy whose vertical error is at most `max_error` metres.
     pub fn mesh(&self, max_error: f64) -> AdaptiveMesh {
+        self.mesh_with(max_error, u16::MAX)
+    }
+
+    /// Like [`Rtin::mesh`], but also splitting every triangle whose legs are longer than
+    /// `max_leg` grid cells (a leg's length counted as `|dx| + |dy|`, so diagonal legs count
+    /// double). Tiles on a curved body use this to bound how far a flat triangle strays from
+    /// the ellipsoid between its corners. The limit depends only on a triangle's level, so
+    /// the mesh stays conforming. A negative `max_error` keeps every grid vertex.
+    pub fn mesh_with(&self, max_error: f64, max_leg: u16) -> AdaptiveMesh {
         let side = self.side;
         let n = (side - 1) as u16;
         let mut builder = MeshBuilder {
             side,
             errors: &self.errors,
             max_error: max_error as f32,
+            max_leg: max_leg.max(1),
             index_of: vec![u32::MAX; side * side],
             mesh: AdaptiveMesh {
                 side,
@@ -96,6 +106,7 @@ struct MeshBuilder<'a> {
     side: usize,
     errors: &'a [f32],
     max_error: f32,
+    max_leg: u16,
     index_of: Vec<u32>,
     mesh: AdaptiveMesh,
 }
@@ -106,7 +117,7 @@ impl MeshBuilder<'_> {
         let m = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2];
         let leg = a[0].abs_diff(c[0]) + a[1].abs_diff(c[1]);
         let at = usize::from(m[1]) * self.side + usize::from(m[0]);
-        if leg > 1 && self.errors[at] > self.max_error {
+        if leg > 1 && (leg > self.max_leg || self.errors[at] > self.max_error) {
             self.split(c, a, m);
             self.split(b, c, m);
         } else {
@@ -412,6 +423,34 @@ mod tests {
         let mesh = Rtin::new(&grid).mesh(1e-3);
         assert_eq!(mesh.triangles.len(), 2);
         assert!(mesh.max_error(&grid) < 1e-4);
+    }
+
+    #[test]
+    fn leg_limit_splits_flat_ground_uniformly_and_stays_conforming() {
+        let grid = HeightGrid::new(33, vec![0.0; 33 * 33]).expect("grid");
+        let rtin = Rtin::new(&grid);
+        for max_leg in [1u16, 2, 4, 8, 16, 32] {
+            let mesh = rtin.mesh_with(1.0, max_leg);
+            let longest = mesh
+                .triangles
+                .iter()
+                .flat_map(|t| {
+                    let p = t.map(|i| mesh.vertices[i as usize]);
+                    (0..3).map(move |k| {
+                        let (a, b) = (p[k], p[(k + 1) % 3]);
+                        a[0].abs_diff(b[0]).max(a[1].abs_diff(b[1]))
+                    })
+                })
+                .max()
+                .unwrap_or(0);
+            // Axis-aligned legs of at most max_leg cells (diagonal legs count double).
+            assert!(
+                longest <= max_leg,
+                "max_leg {max_leg}: edge of {longest} cells"
+            );
+            assert_covers(&mesh);
+        }
+        assert_eq!(rtin.mesh_with(-1.0, 1).triangles.len(), 2 * 32 * 32);
     }
 
     #[test]
