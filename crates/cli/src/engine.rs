@@ -22,10 +22,11 @@ use globus_render::{
     near_plane_m,
 };
 use globus_stream::{
-    LayerStats, ProceduralSource, TerrainLayer, TerrainLayerOptions, TerrainSource,
+    LayerStats, ProceduralSource, RefinedSource, TerrainLayer, TerrainLayerOptions, TerrainSource,
 };
 use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
+use globus_terrain::refine::RefineOptions;
 use globus_tiling::{
     Selection, SelectionOptions, SelectionStats, TileKey, TileRequest, TilingScheme, select_into,
 };
@@ -53,6 +54,9 @@ pub struct GlobeOptions {
     pub workers: usize,
     /// How tile meshes are cut.
     pub mesh: MeshOptions,
+    /// Treat the planet's data as ending at this level and invent everything deeper by
+    /// procedural refinement ([`RefinedSource`]); `None` generates every level.
+    pub refine_below: Option<u8>,
 }
 
 impl Default for GlobeOptions {
@@ -66,6 +70,7 @@ impl Default for GlobeOptions {
             cache_bytes: TerrainLayerOptions::default().cache_bytes,
             workers: TerrainLayerOptions::default().workers,
             mesh: MeshOptions::default(),
+            refine_below: None,
         }
     }
 }
@@ -113,9 +118,22 @@ impl Globe {
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
     ) -> Self {
-        let source: Arc<dyn TerrainSource> = Arc::new(
-            ProceduralSource::new(options.seed, options.max_level).with_mesh_options(options.mesh),
-        );
+        let source: Arc<dyn TerrainSource> = match options.refine_below {
+            None => Arc::new(
+                ProceduralSource::new(options.seed, options.max_level)
+                    .with_mesh_options(options.mesh),
+            ),
+            Some(level) => {
+                let data = ProceduralSource::new(options.seed, level.min(options.max_level))
+                    .with_mesh_options(options.mesh);
+                Arc::new(RefinedSource::new(
+                    Arc::new(data),
+                    RefineOptions::default(),
+                    options.max_level,
+                    options.mesh,
+                ))
+            }
+        };
         let layer = TerrainLayer::new(
             source,
             TerrainLayerOptions {

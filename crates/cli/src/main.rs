@@ -63,6 +63,10 @@ struct GlobeArgs {
     /// error (0 draws every sample of the tile grid).
     #[arg(long = "mesh-error", default_value_t = globus_terrain::MeshOptions::default().error_fraction)]
     mesh_error: f64,
+    /// Treat the planet's data as ending at this level and invent every deeper tile by
+    /// procedural refinement (a stand-in for real data that ends, like 90 m SRTM).
+    #[arg(long = "refine-below")]
+    refine_below: Option<u8>,
 }
 
 #[derive(Args)]
@@ -282,6 +286,7 @@ fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
         mesh: globus_terrain::MeshOptions {
             error_fraction: a.mesh_error,
         },
+        refine_below: a.refine_below,
         ..GlobeOptions::default()
     })
 }

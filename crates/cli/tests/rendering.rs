@@ -267,3 +267,30 @@ fn moving_one_millimetre_at_one_metre_altitude_does_not_jitter() {
         );
     }
 }
+
+/// The refinement wrapper feeds the renderer: with the planet's data cut off at level 11
+/// (about 300 m samples), a view 30 m above mountains is drawn from invented tiles many levels
+/// deeper, complete and without holes.
+#[test]
+fn refined_terrain_below_the_data_renders_without_holes() {
+    let options = GlobeOptions {
+        refine_below: Some(11),
+        ..GlobeOptions::default()
+    };
+    let (w, h) = (480, 270);
+    let mut off = Offscreen::new(&options, w, h).expect("a GPU or lavapipe");
+    let cam = camera(7.6, 46.0, 30.0, 200.0, -10.0, true);
+    let view = cam.view(&off.globe, 60.0, w, h);
+    let frame = off.render_complete(&view, TIMEOUT).expect("render");
+    let dir = globus_test_support::output_dir("rendering");
+    save_png(&frame.image, &dir.join("refined_ground.png")).expect("save");
+    assert!(frame.complete, "refined tiles still loading");
+    let sel = &frame.report.selection;
+    assert!(sel.max_level >= 17, "deepest level {}", sel.max_level);
+    // The camera stands 30 m above the refined ground, not inside a mountain.
+    assert!(coverage(&frame.image) > 0.3);
+    let e = Ellipsoid::WGS84;
+    let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-3_000.0));
+    assert!(inside > 1_000);
+    assert_eq!(holes, 0, "{holes} background pixels inside the silhouette");
+}

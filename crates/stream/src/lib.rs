@@ -1,6 +1,7 @@
 //! `globus-stream`: the data side of Globus.
 //!
-//! Tiles come from a [`TileSource`] (today the procedural planet; later directories, tile
+//! Tiles come from a [`TileSource`] (today the procedural planet, and [`RefinedSource`], which
+//! continues any terrain source below its data with procedural detail; later directories, tile
 //! services and archives), slowly and maybe never. A [`Scheduler`] runs loads on a small pool
 //! of worker threads in priority order, drops requests nobody wants any more, and hands
 //! results back through a bounded channel that the render thread drains without blocking.
@@ -10,11 +11,13 @@
 mod cache;
 mod layer;
 mod procedural;
+mod refined;
 mod scheduler;
 mod source;
 
 pub use cache::LruCache;
 pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
 pub use procedural::ProceduralSource;
+pub use refined::RefinedSource;
 pub use scheduler::{Scheduler, SchedulerStats};
 pub use source::{SourceError, TerrainData, TerrainSource, TileSource, child_bounds};

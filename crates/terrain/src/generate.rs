@@ -140,7 +140,7 @@ impl OctavePlan {
 
 /// Catmull-Rom weights for fraction `t` of the interval between samples 0 and 1
 /// (samples -1, 0, 1, 2).
-fn catmull_rom(t: f64) -> [f64; 4] {
+pub(crate) fn catmull_rom(t: f64) -> [f64; 4] {
     let t2 = t * t;
     let t3 = t2 * t;
     [
@@ -152,7 +152,7 @@ fn catmull_rom(t: f64) -> [f64; 4] {
 }
 
 /// `a` at t = 0 and `b` at t = 1 exactly (so shared edges are bit-identical).
-fn lerp_exact(a: f64, b: f64, t: f64) -> f64 {
+pub(crate) fn lerp_exact(a: f64, b: f64, t: f64) -> f64 {
     a * (1.0 - t) + b * t
 }
 

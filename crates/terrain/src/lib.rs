@@ -9,6 +9,7 @@
 //! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and greedy Delaunay plus
 //!   Kaiser's plane-deviance decimation).
 //! * [`quantized_mesh`]: Cesium's quantized-mesh-1.0, encoded and decoded (untrusted input).
+//! * [`refine`]: procedural refinement below the data (terrain and imagery).
 //! * [`encoding`]: elevation as RGB (Terrarium, Mapbox Terrain-RGB, Kaiser's centimetres).
 
 pub mod adaptive;
@@ -20,6 +21,7 @@ mod mesh;
 pub mod noise;
 mod planet;
 pub mod quantized_mesh;
+pub mod refine;
 mod tile;
 
 pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};

@@ -1,0 +1,220 @@
+//! [`RefinedSource`]: any terrain source, continued below its data by procedural refinement.
+
+use std::sync::{Arc, Mutex};
+
+use globus_geo::Ellipsoid;
+use globus_terrain::refine::{RefineOptions, Refiner};
+use globus_terrain::{MeshOptions, TerrainTile};
+use globus_tiling::{TileKey, TilingScheme};
+
+use crate::cache::LruCache;
+use crate::{SourceError, TerrainData, TerrainSource, TileSource};
+
+/// Base tiles kept for refinement (a view needs a handful of bases at a time).
+const BASE_CACHE_BYTES: usize = 32 << 20;
+
+/// Wraps a geographic terrain source whose data ends at its `max_level`: deeper tiles are
+/// invented from the deepest tile the source has above them ([`Refiner`]), down to
+/// `max_level` of the wrapper. Where the source has no data at a level (`Ok(None)`), the
+/// nearest ancestor it has is refined instead.
+pub struct RefinedSource {
+    inner: Arc<dyn TerrainSource>,
+    refiner: Refiner,
+    data_level: u8,
+    max_level: u8,
+    mesh_options: MeshOptions,
+    /// Base tiles by key; `None` remembers "no data there".
+    bases: Mutex<(LruCache<Option<Arc<TerrainTile>>>, u64)>,
+    name: String,
+}
+
+impl RefinedSource {
+    /// `inner` refined from its deepest level down to `max_level`.
+    pub fn new(
+        inner: Arc<dyn TerrainSource>,
+        options: RefineOptions,
+        max_level: u8,
+        mesh_options: MeshOptions,
+    ) -> Self {
+        let data_level = inner.max_level();
+        let name = format!(
+            "{} refined below level {data_level} to {max_level}",
+            inner.name()
+        );
+        Self {
+            refiner: Refiner::new(options, *inner.ellipsoid()),
+            inner,
+            data_level,
+            max_level: max_level.max(data_level),
+            mesh_options,
+            bases: Mutex::new((LruCache::new(BASE_CACHE_BYTES), 0)),
+            name,
+        }
+    }
+
+    /// The deepest level of real data.
+    pub fn data_level(&self) -> u8 {
+        self.data_level
+    }
+
+    /// The deepest tile of the inner source at or above `key`, loading bases as needed.
+    fn base_for(&self, key: TileKey) -> Result<Option<Arc<TerrainTile>>, SourceError> {
+        let mut level = self.data_level.min(key.level());
+        loop {
+            let Some(candidate) = key.ancestor_at(level) else {
+                return Ok(None);
+            };
+            if let Some(found) = self.cached_base(candidate) {
+                if found.is_some() {
+                    return Ok(found);
+                }
+            } else {
+                let loaded = self.inner.load(candidate)?.map(|d| Arc::new(d.tile));
+                let bytes = loaded.as_ref().map_or(64, |t| t.byte_size());
+                if let Ok(mut guard) = self.bases.lock() {
+                    let (cache, clock) = &mut *guard;
+                    *clock += 1;
+                    cache.insert(candidate, loaded.clone(), bytes, *clock);
+                    cache.evict_to_budget(|_, _| false);
+                }
+                if loaded.is_some() {
+                    return Ok(loaded);
+                }
+            }
+            if level == 0 {
+                return Ok(None);
+            }
+            level -= 1;
+        }
+    }
+
+    fn cached_base(&self, key: TileKey) -> Option<Option<Arc<TerrainTile>>> {
+        let mut guard = self.bases.lock().ok()?;
+        let (cache, clock) = &mut *guard;
+        *clock += 1;
+        cache.touch(key, *clock);
+        cache.get(key).cloned()
+    }
+}
+
+impl TileSource for RefinedSource {
+    type Tile = TerrainData;
+
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn scheme(&self) -> TilingScheme {
+        TilingScheme::Geographic
+    }
+
+    fn load(&self, key: TileKey) -> Result<Option<TerrainData>, SourceError> {
+        if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
+            return Ok(None);
+        }
+        if key.level() <= self.data_level
+            && let Some(data) = self.inner.load(key)?
+        {
+            return Ok(Some(data));
+        }
+        let Some(base) = self.base_for(key)? else {
+            return Ok(None);
+        };
+        if base.key == key {
+            // Cached from an earlier refinement; build it again as the source would.
+            return self.inner.load(key);
+        }
+        let tile = self
+            .refiner
+            .refine(&base, key)
+            .map_err(|e| SourceError::Failed {
+                key,
+                source_name: self.name.clone(),
+                message: e.to_string(),
+            })?;
+        Ok(Some(TerrainData::build(
+            tile,
+            self.inner.ellipsoid(),
+            self.inner.occluder(),
+            &self.mesh_options,
+        )))
+    }
+
+    fn byte_size(&self, tile: &TerrainData) -> usize {
+        tile.byte_size()
+    }
+}
+
+impl TerrainSource for RefinedSource {
+    fn ellipsoid(&self) -> &Ellipsoid {
+        self.inner.ellipsoid()
+    }
+
+    fn occluder(&self) -> &Ellipsoid {
+        // Refined heights never go below the base's lowest point nor below sea level.
+        self.inner.occluder()
+    }
+
+    fn height_range_m(&self) -> (f64, f64) {
+        let (lo, hi) = self.inner.height_range_m();
+        // Detail adds at most half a height above the sea (see the refine module).
+        (lo, hi * 1.5)
+    }
+
+    fn max_level(&self) -> u8 {
+        self.max_level
+    }
+
+    fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
+        let key = TilingScheme::Geographic.tile_at(lon_rad, lat_rad, self.data_level)?;
+        let base = self.base_for(key).ok()??;
+        let depth = self.max_level - base.key.level();
+        Some(self.refiner.height_at(&base, lon_rad, lat_rad, depth))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ProceduralSource;
+
+    #[test]
+    fn data_levels_pass_through_and_deeper_levels_are_refined() {
+        let inner: Arc<dyn TerrainSource> = Arc::new(ProceduralSource::new(1, 10));
+        let source = RefinedSource::new(
+            inner.clone(),
+            RefineOptions::default(),
+            22,
+            MeshOptions::default(),
+        );
+        assert_eq!((source.data_level(), source.max_level()), (10, 22));
+        let data_key = TileKey::new(10, 703, 522);
+        let direct = inner.load(data_key).expect("load").expect("tile");
+        let through = source.load(data_key).expect("load").expect("tile");
+        assert_eq!(direct.tile.heights_m, through.tile.heights_m);
+        // A deep tile: refined from the level-10 base, deterministic, with its own mesh.
+        let deep = TileKey::new(18, 703 * 256 + 17, 522 * 256 + 200);
+        let a = source.load(deep).expect("load").expect("refined");
+        let b = source.load(deep).expect("load").expect("refined");
+        assert_eq!(a.tile.heights_m, b.tile.heights_m);
+        assert_eq!(a.mesh.indices, b.mesh.indices);
+        assert!(a.tile.geometric_error_m < direct.tile.geometric_error_m);
+        // Height queries agree with the deep tile's samples within its error.
+        let rect = a.tile.rect;
+        let h = source
+            .height_at(rect.west, rect.north)
+            .expect("height under the data");
+        let corner = f64::from(a.tile.height_at(0, 0));
+        assert!(
+            (h - corner).abs() <= a.tile.geometric_error_m + 1e-3,
+            "{h} vs {corner}"
+        );
+        // Beyond the wrapper's depth: no data.
+        assert!(
+            source
+                .load(TileKey::new(23, 703 << 13, 522 << 13))
+                .expect("load")
+                .is_none()
+        );
+    }
+}
