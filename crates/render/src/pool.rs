@@ -25,10 +25,9 @@ use rustc_hash::FxHashMap;
 
 use crate::ranges::RangeAllocator;
 
-/// Vertices of the largest tile mesh (every sample of the 33 x 33 grid and its skirts).
-pub const MAX_TILE_VERTICES: u32 = 33 * 33 + 4 * 33;
-/// Indices of the largest tile mesh.
-pub const MAX_TILE_INDICES: u32 = (2 * 32 * 32 + 4 * 32 * 2) * 3;
+pub use globus_terrain::grid::{
+    MAX_MESH_INDICES as MAX_TILE_INDICES, MAX_MESH_VERTICES as MAX_TILE_VERTICES,
+};
 
 /// Size of the pools.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -70,13 +70,7 @@ impl RefinedSource {
                 }
             } else {
                 let loaded = self.inner.load(candidate)?.map(|d| Arc::new(d.tile));
-                let bytes = loaded.as_ref().map_or(64, |t| t.byte_size());
-                if let Ok(mut guard) = self.bases.lock() {
-                    let (cache, clock) = &mut *guard;
-                    *clock += 1;
-                    cache.insert(candidate, loaded.clone(), bytes, *clock);
-                    cache.evict_to_budget(|_, _| false);
-                }
+                self.remember(candidate, loaded.clone());
                 if loaded.is_some() {
                     return Ok(loaded);
                 }
@@ -85,6 +79,17 @@ impl RefinedSource {
                 return Ok(None);
             }
             level -= 1;
+        }
+    }
+
+    /// Caches a base tile, or that the inner source has none at `key`.
+    fn remember(&self, key: TileKey, base: Option<Arc<TerrainTile>>) {
+        let bytes = base.as_ref().map_or(64, |t| t.byte_size());
+        if let Ok(mut guard) = self.bases.lock() {
+            let (cache, clock) = &mut *guard;
+            *clock += 1;
+            cache.insert(key, base, bytes, *clock);
+            cache.evict_to_budget(|_, _| false);
         }
     }
 
@@ -112,18 +117,16 @@ impl TileSource for RefinedSource {
         if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
             return Ok(None);
         }
-        if key.level() <= self.data_level
-            && let Some(data) = self.inner.load(key)?
-        {
-            return Ok(Some(data));
+        if key.level() <= self.data_level {
+            if let Some(data) = self.inner.load(key)? {
+                return Ok(Some(data));
+            }
+            // No data here: refine from the nearest ancestor that has some.
+            self.remember(key, None);
         }
         let Some(base) = self.base_for(key)? else {
             return Ok(None);
         };
-        if base.key == key {
-            // Cached from an earlier refinement; build it again as the source would.
-            return self.inner.load(key);
-        }
         let tile = self
             .refiner
             .refine(&base, key)
@@ -216,5 +219,79 @@ mod tests {
                 .expect("load")
                 .is_none()
         );
+    }
+
+    /// A source with a hole: no data for one level-10 tile.
+    struct Holey(ProceduralSource, TileKey);
+
+    impl TileSource for Holey {
+        type Tile = TerrainData;
+        fn name(&self) -> &str {
+            "holey"
+        }
+        fn scheme(&self) -> TilingScheme {
+            TilingScheme::Geographic
+        }
+        fn load(&self, key: TileKey) -> Result<Option<TerrainData>, SourceError> {
+            if self.1.contains(key) {
+                return Ok(None);
+            }
+            self.0.load(key)
+        }
+        fn byte_size(&self, tile: &TerrainData) -> usize {
+            tile.byte_size()
+        }
+    }
+
+    impl TerrainSource for Holey {
+        fn ellipsoid(&self) -> &Ellipsoid {
+            self.0.ellipsoid()
+        }
+        fn occluder(&self) -> &Ellipsoid {
+            self.0.occluder()
+        }
+        fn height_range_m(&self) -> (f64, f64) {
+            self.0.height_range_m()
+        }
+        fn max_level(&self) -> u8 {
+            self.0.max_level()
+        }
+    }
+
+    #[test]
+    fn holes_in_the_data_are_refined_from_the_nearest_ancestor_with_data() {
+        let hole = TileKey::new(10, 703, 522);
+        let inner = Arc::new(Holey(ProceduralSource::new(1, 10), hole));
+        let source =
+            RefinedSource::new(inner, RefineOptions::default(), 16, MeshOptions::default());
+        let parent = source
+            .load(hole.parent().expect("parent"))
+            .expect("load")
+            .expect("real data above the hole");
+        let filled = source.load(hole).expect("load").expect("refined");
+        assert_eq!(filled.tile.key, hole);
+        // Refined from the level-9 parent: at the parent's own samples it stays within the
+        // parent's error.
+        let (qx, qy) = ((hole.x() & 1) as i32 * 16, (hole.y() & 1) as i32 * 16);
+        for b in 0..=16 {
+            for a in 0..=16 {
+                let d = filled.tile.height_at(2 * a, 2 * b) - parent.tile.height_at(qx + a, qy + b);
+                assert!(
+                    f64::from(d.abs()) <= parent.tile.geometric_error_m,
+                    "{a},{b}: {d}"
+                );
+            }
+        }
+        // Deeper tiles in the hole come from the same level-9 base: the filled tile's children
+        // agree with it along its west edge at the shared samples.
+        let child = hole.children().expect("children")[0];
+        let c = source.load(child).expect("load").expect("refined child");
+        for j in 0..=16 {
+            let (a, b) = (filled.tile.height_at(0, j), c.tile.height_at(0, 2 * j));
+            assert!(
+                f64::from((a - b).abs()) <= filled.tile.geometric_error_m,
+                "row {j}: {a} vs {b}"
+            );
+        }
     }
 }

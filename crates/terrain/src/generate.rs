@@ -26,7 +26,7 @@ use globus_tiling::{GeoRect, TileKey, TilingScheme};
 use crate::biome::{self, Surface};
 use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
 use crate::planet::{Fields, ProceduralPlanet, Relief};
-use crate::tile::{ColourImage, TerrainTile};
+use crate::tile::{ColourImage, TerrainTile, height_range};
 
 /// Fine samples per mesh cell.
 const OVERSAMPLE: i32 = 4;
@@ -185,11 +185,7 @@ impl ProceduralPlanet {
         let bulge = self.mesh_bulge_m(&rect);
         let omitted = self.omitted_amplitude_m(plan.finest_m, max_weight);
         let colour = self.colour_image(&fine_pts, &fine_coarse, &raw, &rendered, &micro);
-        let (min_h, max_h) = heights_m
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
-                (lo.min(f64::from(h)), hi.max(f64::from(h)))
-            });
+        let (min_h, max_h) = height_range(&heights_m);
         TerrainTile {
             key,
             rect,

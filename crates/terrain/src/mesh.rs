@@ -375,6 +375,9 @@ mod tests {
             }
             let (_, full) = mesh_with(key, &MeshOptions::FULL_GRID);
             assert_eq!(full.surface_triangles, 2 * 32 * 32);
+            // The largest mesh is what the GPU pools are sized by.
+            assert_eq!(full.vertices.len() as u32, crate::grid::MAX_MESH_VERTICES);
+            assert_eq!(full.indices.len() as u32, crate::grid::MAX_MESH_INDICES);
             assert_eq!(full.cut_error_m, 0.0);
         }
     }

@@ -33,7 +33,7 @@ use crate::generate::{catmull_rom, lerp_exact};
 use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
 use crate::noise::{NOISE_BOUND, Octaves};
 use crate::planet::smoothstep;
-use crate::tile::{ColourImage, TerrainTile};
+use crate::tile::{ColourImage, TerrainTile, height_range};
 
 /// Parameters of the invented detail.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,11 +271,7 @@ impl Refiner {
         let geometric_error_m = 1.5 * interpolation + omitted + bulge;
 
         let colour = self.colour(&b, &rect, depth, max_amp);
-        let (min_h, max_h) = heights_m
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
-                (lo.min(f64::from(h)), hi.max(f64::from(h)))
-            });
+        let (min_h, max_h) = height_range(&heights_m);
         Ok(TerrainTile {
             key,
             rect,

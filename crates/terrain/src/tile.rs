@@ -56,6 +56,15 @@ impl TerrainTile {
     }
 }
 
+/// The lowest and highest of a tile's heights, metres.
+pub(crate) fn height_range(heights_m: &[f32]) -> (f64, f64) {
+    heights_m
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(f64::from(h)), hi.max(f64::from(h)))
+        })
+}
+
 /// A square RGBA8 image (sRGB colour, alpha = 255 on land and 0 on water) with its full mip
 /// chain, level 0 first.
 #[derive(Clone, Debug, PartialEq)]
