@@ -9,8 +9,12 @@
 //! selection's questions as a [`globus_tiling::TileOracle`].
 
 mod cache;
+pub mod decode;
+pub mod fetch;
 mod layer;
 mod procedural;
+pub mod pyramid;
+mod raster_terrain;
 mod refined;
 mod scheduler;
 mod source;
@@ -19,5 +23,8 @@ pub use cache::LruCache;
 pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
 pub use procedural::ProceduralSource;
 pub use refined::RefinedSource;
-pub use scheduler::{Scheduler, SchedulerStats};
+pub use raster_terrain::RasterTerrainSource;
+pub use scheduler::{
+    Clock, Outcome, RetryPolicy, Scheduler, SchedulerOptions, SchedulerStats, SystemClock,
+};
 pub use source::{SourceError, TerrainData, TerrainSource, TileSource, child_bounds};

@@ -4,6 +4,7 @@ use globus_geo::Ellipsoid;
 use globus_terrain::{MeshOptions, ProceduralPlanet, TerrainTile};
 use globus_tiling::{TileKey, TilingScheme};
 
+use crate::fetch::Cancel;
 use crate::{SourceError, TerrainData, TerrainSource, TileSource};
 
 /// Generates terrain tiles of a [`ProceduralPlanet`] (geographic scheme).
@@ -63,7 +64,7 @@ impl TileSource for ProceduralSource {
         TilingScheme::Geographic
     }
 
-    fn load(&self, key: TileKey) -> Result<Option<TerrainData>, SourceError> {
+    fn load(&self, key: TileKey, _cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
         if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
             return Ok(None);
         }

@@ -8,6 +8,7 @@ use globus_terrain::{MeshOptions, TerrainTile};
 use globus_tiling::{TileKey, TilingScheme};
 
 use crate::cache::LruCache;
+use crate::fetch::Cancel;
 use crate::{SourceError, TerrainData, TerrainSource, TileSource};
 
 /// Base tiles kept for refinement (a view needs a handful of bases at a time).
@@ -58,7 +59,7 @@ impl RefinedSource {
     }
 
     /// The deepest tile of the inner source at or above `key`, loading bases as needed.
-    fn base_for(&self, key: TileKey) -> Result<Option<Arc<TerrainTile>>, SourceError> {
+    fn base_for(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<TerrainTile>>, SourceError> {
         let mut level = self.data_level.min(key.level());
         loop {
             let Some(candidate) = key.ancestor_at(level) else {
@@ -69,7 +70,7 @@ impl RefinedSource {
                     return Ok(found);
                 }
             } else {
-                let loaded = self.inner.load(candidate)?.map(|d| Arc::new(d.tile));
+                let loaded = self.inner.load(candidate, cancel)?.map(|d| Arc::new(d.tile));
                 self.remember(candidate, loaded.clone());
                 if loaded.is_some() {
                     return Ok(loaded);
@@ -113,18 +114,18 @@ impl TileSource for RefinedSource {
         TilingScheme::Geographic
     }
 
-    fn load(&self, key: TileKey) -> Result<Option<TerrainData>, SourceError> {
+    fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
         if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
             return Ok(None);
         }
         if key.level() <= self.data_level {
-            if let Some(data) = self.inner.load(key)? {
+            if let Some(data) = self.inner.load(key, cancel)? {
                 return Ok(Some(data));
             }
             // No data here: refine from the nearest ancestor that has some.
             self.remember(key, None);
         }
-        let Some(base) = self.base_for(key)? else {
+        let Some(base) = self.base_for(key, cancel)? else {
             return Ok(None);
         };
         let tile = self
@@ -169,8 +170,16 @@ impl TerrainSource for RefinedSource {
     }
 
     fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
+        // Only bases already loaded: this runs on the render thread, and the inner source may
+        // be a network service.
         let key = TilingScheme::Geographic.tile_at(lon_rad, lat_rad, self.data_level)?;
-        let base = self.base_for(key).ok()??;
+        let base = (0..=self.data_level)
+            .rev()
+            .filter_map(|level| self.cached_base(key.ancestor_at(level)?).flatten())
+            .next();
+        let Some(base) = base else {
+            return self.inner.height_at(lon_rad, lat_rad);
+        };
         let depth = self.max_level - base.key.level();
         Some(self.refiner.height_at(&base, lon_rad, lat_rad, depth))
     }
@@ -192,13 +201,17 @@ mod tests {
         );
         assert_eq!((source.data_level(), source.max_level()), (10, 22));
         let data_key = TileKey::new(10, 703, 522);
-        let direct = inner.load(data_key).expect("load").expect("tile");
-        let through = source.load(data_key).expect("load").expect("tile");
+        let direct = inner.load(data_key, &Cancel::new())
+                .expect("load").expect("tile");
+        let through = source.load(data_key, &Cancel::new())
+                .expect("load").expect("tile");
         assert_eq!(direct.tile.heights_m, through.tile.heights_m);
         // A deep tile: refined from the level-10 base, deterministic, with its own mesh.
         let deep = TileKey::new(18, 703 * 256 + 17, 522 * 256 + 200);
-        let a = source.load(deep).expect("load").expect("refined");
-        let b = source.load(deep).expect("load").expect("refined");
+        let a = source.load(deep, &Cancel::new())
+                .expect("load").expect("refined");
+        let b = source.load(deep, &Cancel::new())
+                .expect("load").expect("refined");
         assert_eq!(a.tile.heights_m, b.tile.heights_m);
         assert_eq!(a.mesh.indices, b.mesh.indices);
         assert!(a.tile.geometric_error_m < direct.tile.geometric_error_m);
@@ -215,7 +228,7 @@ mod tests {
         // Beyond the wrapper's depth: no data.
         assert!(
             source
-                .load(TileKey::new(23, 703 << 13, 522 << 13))
+                .load(TileKey::new(23, 703 << 13, 522 << 13), &Cancel::new())
                 .expect("load")
                 .is_none()
         );
@@ -232,11 +245,11 @@ mod tests {
         fn scheme(&self) -> TilingScheme {
             TilingScheme::Geographic
         }
-        fn load(&self, key: TileKey) -> Result<Option<TerrainData>, SourceError> {
+        fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
             if self.1.contains(key) {
                 return Ok(None);
             }
-            self.0.load(key)
+            self.0.load(key, cancel)
         }
         fn byte_size(&self, tile: &TerrainData) -> usize {
             tile.byte_size()
@@ -265,10 +278,11 @@ mod tests {
         let source =
             RefinedSource::new(inner, RefineOptions::default(), 16, MeshOptions::default());
         let parent = source
-            .load(hole.parent().expect("parent"))
+            .load(hole.parent().expect("parent"), &Cancel::new())
             .expect("load")
             .expect("real data above the hole");
-        let filled = source.load(hole).expect("load").expect("refined");
+        let filled = source.load(hole, &Cancel::new())
+                .expect("load").expect("refined");
         assert_eq!(filled.tile.key, hole);
         // Refined from the level-9 parent: at the parent's own samples it stays within the
         // parent's error.
@@ -285,7 +299,8 @@ mod tests {
         // Deeper tiles in the hole come from the same level-9 base: the filled tile's children
         // agree with it along its west edge at the shared samples.
         let child = hole.children().expect("children")[0];
-        let c = source.load(child).expect("load").expect("refined child");
+        let c = source.load(child, &Cancel::new())
+                .expect("load").expect("refined child");
         for j in 0..=16 {
             let (a, b) = (filled.tile.height_at(0, j), c.tile.height_at(0, 2 * j));
             assert!(

@@ -1,11 +1,18 @@
 //! The request scheduler: a priority queue of wanted tiles feeding a pool of worker threads.
 //!
 //! * Every frame the engine [`Scheduler::submit`]s the selection's wanted list. Queued tiles
-//!   that are no longer wanted are cancelled before they start; new ones are queued; the
-//!   queue is re-ordered by the new priorities. Duplicates merge (a tile is queued or in
-//!   flight at most once).
-//! * Workers take the highest priority tile, load it (decoding and mesh building included)
-//!   and send the outcome through a bounded channel.
+//!   that are no longer wanted are cancelled before they start; tiles in flight that are no
+//!   longer wanted get their [`Cancel`] flag set, so a download stops at its next chunk and
+//!   its result is dropped; new tiles are queued; the queue is re-ordered by the new
+//!   priorities (ties: shallower first, so ancestors come before descendants). Duplicates
+//!   merge (a tile is queued or in flight at most once).
+//! * Workers take the highest-priority tile that is not waiting out a backoff, load it
+//!   (fetching, decoding and mesh building included) and send the outcome through a bounded
+//!   channel.
+//! * Transient failures (timeouts, resets, 5xx, 429) are retried up to
+//!   [`RetryPolicy::max_attempts`] times while the tile is still wanted, after an exponential
+//!   backoff with jitter, or after the server's Retry-After. The [`Clock`] is injectable so
+//!   tests can drive time.
 //! * The render thread collects outcomes with [`Scheduler::drain`], which never blocks.
 //!
 //! A panic inside a source is caught and reported as a failure of that one tile.
@@ -13,11 +20,13 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, bounded};
 use globus_tiling::{TileKey, TileRequest};
-use rustc_hash::FxHashSet;
+use rustc_hash::{FxHashMap, FxHashSet};
 
+use crate::fetch::Cancel;
 use crate::{SourceError, TileSource};
 
 /// What became of a request.
@@ -27,7 +36,7 @@ pub enum Outcome<T> {
     Loaded(Arc<T>),
     /// The source has no data for it.
     NoData,
-    /// Loading failed.
+    /// Loading failed for good (permanently, or transiently more often than allowed).
     Failed(SourceError),
 }
 
@@ -36,29 +45,152 @@ pub enum Outcome<T> {
 pub struct SchedulerStats {
     /// Tiles queued (each distinct queueing counts once).
     pub requested: u64,
+    /// Loads started (retries included).
+    pub started: u64,
     /// Queued tiles dropped before they started because nobody wanted them any more.
     pub cancelled: u64,
+    /// Loads in flight told to stop because nobody wanted them any more.
+    pub cancelled_in_flight: u64,
+    /// Loads that stopped on cancellation and whose result was dropped.
+    pub dropped: u64,
     /// Tiles loaded.
     pub loaded: u64,
     /// Tiles the source had no data for.
     pub no_data: u64,
-    /// Tiles that failed.
+    /// Tiles that failed for good.
     pub failed: u64,
+    /// Transient failures that were scheduled for another attempt.
+    pub retries: u64,
+}
+
+/// A monotonic clock (injectable for tests).
+pub trait Clock: Send + Sync + 'static {
+    /// Time since an arbitrary origin.
+    fn now(&self) -> Duration;
+}
+
+/// The real clock.
+pub struct SystemClock(Instant);
+
+impl Default for SystemClock {
+    fn default() -> Self {
+        Self(Instant::now())
+    }
+}
+
+impl Clock for SystemClock {
+    fn now(&self) -> Duration {
+        self.0.elapsed()
+    }
+}
+
+/// How transient failures are retried.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RetryPolicy {
+    /// Attempts per tile in all (the first included).
+    pub max_attempts: u32,
+    /// Backoff before the second attempt; doubles each time.
+    pub base_delay: Duration,
+    /// Longest backoff.
+    pub max_delay: Duration,
+    /// Longest Retry-After honoured (a server asking for more gets this).
+    pub max_retry_after: Duration,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        Self {
+            max_attempts: 4,
+            base_delay: Duration::from_millis(250),
+            max_delay: Duration::from_secs(20),
+            max_retry_after: Duration::from_secs(120),
+        }
+    }
+}
+
+impl RetryPolicy {
+    /// The wait before attempt `failed + 1` after `failed` failures: the server's
+    /// Retry-After if given, else `base * 2^(failed - 1)` capped, scaled by a jitter factor
+    /// in [0.5, 1) from `jitter` in [0, 1) (so many clients do not retry in step).
+    pub fn delay(&self, failed: u32, retry_after: Option<Duration>, jitter: f64) -> Duration {
+        if let Some(r) = retry_after {
+            return r.min(self.max_retry_after);
+        }
+        let exp = self
+            .base_delay
+            .saturating_mul(1u32 << failed.saturating_sub(1).min(20))
+            .min(self.max_delay);
+        exp.mul_f64(0.5 + 0.5 * jitter.clamp(0.0, 1.0))
+    }
+}
+
+/// Knobs of a scheduler.
+#[derive(Clone, Copy, Debug)]
+pub struct SchedulerOptions {
+    /// Worker threads, which is also the most loads in flight at once.
+    pub workers: usize,
+    /// Retrying.
+    pub retry: RetryPolicy,
 }
 
 struct Queue {
     /// Ascending priority: the last element is taken next.
     pending: Vec<(f64, TileKey)>,
     queued: FxHashSet<TileKey>,
-    in_flight: FxHashSet<TileKey>,
+    in_flight: FxHashMap<TileKey, Cancel>,
+    /// Tiles that failed transiently: failures so far and when they may be tried again.
+    backoff: FxHashMap<TileKey, (u32, Duration)>,
+    /// The last submitted priorities (to re-queue a retry while still wanted).
+    wanted: FxHashMap<TileKey, f64>,
     shutdown: bool,
     stats: SchedulerStats,
+    jitter_state: u64,
+}
+
+impl Queue {
+    fn sort(&mut self) {
+        self.pending
+            .sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.level().cmp(&a.1.level())));
+    }
+
+    /// Takes the highest-priority tile not waiting out a backoff; else says how long until
+    /// the first one may go.
+    fn take(&mut self, now: Duration) -> Result<TileKey, Option<Duration>> {
+        let mut wait: Option<Duration> = None;
+        for i in (0..self.pending.len()).rev() {
+            let key = self.pending[i].1;
+            match self.backoff.get(&key) {
+                Some(&(_, ready)) if ready > now => {
+                    let w = ready - now;
+                    wait = Some(wait.map_or(w, |x: Duration| x.min(w)));
+                }
+                _ => {
+                    self.pending.remove(i);
+                    self.queued.remove(&key);
+                    return Ok(key);
+                }
+            }
+        }
+        Err(wait)
+    }
+
+    fn jitter(&mut self) -> f64 {
+        // xorshift64*: enough to spread retries apart.
+        let mut x = self.jitter_state;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.jitter_state = x;
+        (x.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
 }
 
 struct Shared<S: ?Sized> {
     source: Arc<S>,
     queue: Mutex<Queue>,
     wake: Condvar,
+    clock: Arc<dyn Clock>,
+    retry: RetryPolicy,
 }
 
 impl<S: ?Sized> Shared<S> {
@@ -73,6 +205,9 @@ type Message<T> = (TileKey, Outcome<T>);
 
 /// Worker priority on the crate's 0 (lowest) to 99 scale; 37 maps to nice 5 on Linux.
 const WORKER_PRIORITY: u8 = 37;
+/// Longest a worker sleeps before looking at the clock again (a fake clock moves without
+/// notifying).
+const MAX_IDLE_WAIT: Duration = Duration::from_millis(100);
 
 /// Runs a [`TileSource`]'s loads on worker threads in priority order.
 pub struct Scheduler<S: TileSource + ?Sized> {
@@ -82,19 +217,36 @@ pub struct Scheduler<S: TileSource + ?Sized> {
 }
 
 impl<S: TileSource + ?Sized> Scheduler<S> {
-    /// Starts `workers` threads (at least one) loading from `source`.
+    /// Starts `workers` threads (at least one) loading from `source`, retrying by default.
     pub fn new(source: Arc<S>, workers: usize) -> Self {
-        let workers = workers.max(1);
+        Self::with_clock(
+            source,
+            SchedulerOptions {
+                workers,
+                retry: RetryPolicy::default(),
+            },
+            Arc::new(SystemClock::default()),
+        )
+    }
+
+    /// Starts a scheduler with `options`, timing backoffs on `clock`.
+    pub fn with_clock(source: Arc<S>, options: SchedulerOptions, clock: Arc<dyn Clock>) -> Self {
+        let workers = options.workers.max(1);
         let shared = Arc::new(Shared {
             source,
             queue: Mutex::new(Queue {
                 pending: Vec::new(),
                 queued: FxHashSet::default(),
-                in_flight: FxHashSet::default(),
+                in_flight: FxHashMap::default(),
+                backoff: FxHashMap::default(),
+                wanted: FxHashMap::default(),
                 shutdown: false,
                 stats: SchedulerStats::default(),
+                jitter_state: 0x9E37_79B9_7F4A_7C15,
             }),
             wake: Condvar::new(),
+            clock,
+            retry: options.retry,
         });
         let (tx, rx) = bounded(workers * 4);
         let handles = (0..workers)
@@ -115,15 +267,18 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
         }
     }
 
-    /// Replaces the wanted set with `requests`. Tiles in flight keep loading; tiles already
-    /// loaded must not be requested (the caller knows what it holds).
+    /// Replaces the wanted set with `requests`. Tiles in flight keep loading if still wanted
+    /// and are told to stop if not; tiles already loaded must not be requested (the caller
+    /// knows what it holds).
     pub fn submit(&self, requests: &[TileRequest]) {
         let mut q = self.shared.lock();
         let q = &mut *q;
         let old: FxHashSet<TileKey> = std::mem::take(&mut q.queued);
         q.pending.clear();
+        q.wanted.clear();
         for r in requests {
-            if q.in_flight.contains(&r.key) || !q.queued.insert(r.key) {
+            q.wanted.insert(r.key, r.priority);
+            if q.in_flight.contains_key(&r.key) || !q.queued.insert(r.key) {
                 continue;
             }
             if !old.contains(&r.key) {
@@ -132,12 +287,29 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
             q.pending.push((r.priority, r.key));
         }
         q.stats.cancelled += old.iter().filter(|k| !q.queued.contains(k)).count() as u64;
-        q.pending
-            .sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.level().cmp(&a.1.level())));
+        for (key, cancel) in &q.in_flight {
+            if !q.wanted.contains_key(key) && !cancel.is_cancelled() {
+                cancel.cancel();
+                q.stats.cancelled_in_flight += 1;
+            }
+        }
+        // Forget backoffs of tiles nobody has wanted for a long time.
+        if q.backoff.len() > 4096 {
+            let now = self.shared.clock.now();
+            let wanted = &q.wanted;
+            q.backoff
+                .retain(|k, (_, ready)| wanted.contains_key(k) || *ready + Duration::from_secs(600) > now);
+        }
+        q.sort();
         drop(old);
         if !q.pending.is_empty() {
             self.shared.wake.notify_all();
         }
+    }
+
+    /// Wakes the workers to look at the clock again (after a fake clock moved).
+    pub fn poke(&self) {
+        self.shared.wake.notify_all();
     }
 
     /// Outcomes that arrived since the last call, without blocking.
@@ -154,11 +326,11 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
 
     /// Blocks until an outcome arrives or `timeout` passes (for offline rendering, which
     /// waits for loads on purpose).
-    pub fn wait_one(&self, timeout: std::time::Duration) -> Option<(TileKey, Outcome<S::Tile>)> {
+    pub fn wait_one(&self, timeout: Duration) -> Option<(TileKey, Outcome<S::Tile>)> {
         self.results.as_ref()?.recv_timeout(timeout).ok()
     }
 
-    /// Tiles queued but not started.
+    /// Tiles queued but not started (including those waiting out a backoff).
     pub fn queued(&self) -> usize {
         self.shared.lock().pending.len()
     }
@@ -171,7 +343,7 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
     /// Whether `key` is queued or in flight.
     pub fn is_pending(&self, key: TileKey) -> bool {
         let q = self.shared.lock();
-        q.queued.contains(&key) || q.in_flight.contains(&key)
+        q.queued.contains(&key) || q.in_flight.contains_key(&key)
     }
 
     /// Counters.
@@ -191,6 +363,9 @@ impl<S: TileSource + ?Sized> Drop for Scheduler<S> {
             let mut q = self.shared.lock();
             q.shutdown = true;
             q.pending.clear();
+            for c in q.in_flight.values() {
+                c.cancel();
+            }
         }
         self.shared.wake.notify_all();
         // Dropping the receiver releases workers blocked on a full channel.
@@ -211,43 +386,109 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
         );
     }
     loop {
-        let key = {
+        let (key, cancel) = {
             let mut q = shared.lock();
             loop {
                 if q.shutdown {
                     return;
                 }
-                if let Some((_, key)) = q.pending.pop() {
-                    q.queued.remove(&key);
-                    q.in_flight.insert(key);
-                    break key;
+                match q.take(shared.clock.now()) {
+                    Ok(key) => {
+                        let cancel = Cancel::new();
+                        q.in_flight.insert(key, cancel.clone());
+                        q.stats.started += 1;
+                        break (key, cancel);
+                    }
+                    Err(wait) => {
+                        let wait = wait.map_or(MAX_IDLE_WAIT, |w| w.min(MAX_IDLE_WAIT));
+                        q = shared
+                            .wake
+                            .wait_timeout(q, wait)
+                            .map(|(g, _)| g)
+                            .unwrap_or_else(|p| p.into_inner().0);
+                    }
                 }
-                q = shared.wake.wait(q).unwrap_or_else(|p| p.into_inner());
             }
         };
         let source = &shared.source;
-        let outcome = match catch_unwind(AssertUnwindSafe(|| source.load(key))) {
-            Ok(Ok(Some(tile))) => Outcome::Loaded(Arc::new(tile)),
-            Ok(Ok(None)) => Outcome::NoData,
-            Ok(Err(e)) => Outcome::Failed(e),
-            Err(panic) => Outcome::Failed(SourceError::Failed {
+        let result = match catch_unwind(AssertUnwindSafe(|| source.load(key, &cancel))) {
+            Ok(r) => r,
+            Err(panic) => Err(SourceError::Failed {
                 key,
                 source_name: source.name().to_string(),
                 message: format!("the source panicked: {}", panic_message(&*panic)),
             }),
         };
-        {
+        let outcome = {
             let mut q = shared.lock();
-            match &outcome {
-                Outcome::Loaded(_) => q.stats.loaded += 1,
-                Outcome::NoData => q.stats.no_data += 1,
-                Outcome::Failed(_) => q.stats.failed += 1,
+            // Retries and dropped loads leave flight now; delivered ones once sent (so a
+            // submit in between cannot queue the tile again).
+            let outcome = match result {
+                Ok(Some(tile)) => {
+                    q.backoff.remove(&key);
+                    q.stats.loaded += 1;
+                    Some(Outcome::Loaded(Arc::new(tile)))
+                }
+                Ok(None) => {
+                    q.backoff.remove(&key);
+                    q.stats.no_data += 1;
+                    Some(Outcome::NoData)
+                }
+                Err(SourceError::Cancelled { .. }) => {
+                    q.stats.dropped += 1;
+                    None
+                }
+                Err(e @ SourceError::Transient { .. }) => {
+                    let failed = q.backoff.get(&key).map_or(0, |b| b.0) + 1;
+                    if failed >= shared.retry.max_attempts {
+                        q.backoff.remove(&key);
+                        q.stats.failed += 1;
+                        Some(Outcome::Failed(e))
+                    } else {
+                        let retry_after = match &e {
+                            SourceError::Transient { retry_after, .. } => *retry_after,
+                            _ => None,
+                        };
+                        let jitter = q.jitter();
+                        let ready =
+                            shared.clock.now() + shared.retry.delay(failed, retry_after, jitter);
+                        q.backoff.insert(key, (failed, ready));
+                        q.stats.retries += 1;
+                        q.in_flight.remove(&key);
+                        if let Some(&p) = q.wanted.get(&key)
+                            && q.queued.insert(key)
+                        {
+                            q.pending.push((p, key));
+                            q.sort();
+                        }
+                        None
+                    }
+                }
+                Err(e) => {
+                    q.backoff.remove(&key);
+                    q.stats.failed += 1;
+                    Some(Outcome::Failed(e))
+                }
+            };
+            let outcome =
+                if cancel.is_cancelled() && matches!(outcome, Some(Outcome::Failed(_))) {
+                    // A failure of a tile nobody wants is not worth reporting.
+                    q.stats.dropped += 1;
+                    None
+                } else {
+                    outcome
+                };
+            if outcome.is_none() {
+                q.in_flight.remove(&key);
             }
-        }
-        let sent = tx.send((key, outcome)).is_ok();
-        shared.lock().in_flight.remove(&key);
-        if !sent {
-            return;
+            outcome
+        };
+        if let Some(outcome) = outcome {
+            let sent = tx.send((key, outcome)).is_ok();
+            shared.lock().in_flight.remove(&key);
+            if !sent {
+                return;
+            }
         }
     }
 }
@@ -281,7 +522,7 @@ mod tests {
         fn scheme(&self) -> TilingScheme {
             TilingScheme::Geographic
         }
-        fn load(&self, key: TileKey) -> Result<Option<u32>, SourceError> {
+        fn load(&self, key: TileKey, _: &Cancel) -> Result<Option<u32>, SourceError> {
             self.started.fetch_add(1, Ordering::SeqCst);
             while !*self.gate.lock().unwrap() {
                 std::thread::sleep(Duration::from_millis(1));

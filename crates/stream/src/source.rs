@@ -5,10 +5,12 @@ use globus_terrain::grid::MESH_SEGMENTS;
 use globus_terrain::{MeshOptions, TerrainTile, TileMesh};
 use globus_tiling::{TileBounds, TileKey, TilingScheme};
 
+use crate::fetch::Cancel;
+
 /// Why a tile could not be loaded. Every error names the tile and the source.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SourceError {
-    /// The source failed to produce the tile.
+    /// The source failed to produce the tile, and trying again will not help.
     #[error("tile {key} from {source_name}: {message}")]
     Failed {
         /// The tile.
@@ -17,6 +19,25 @@ pub enum SourceError {
         source_name: String,
         /// What went wrong.
         message: String,
+    },
+    /// The source failed this time (a timeout, a reset, HTTP 5xx or 429); the scheduler
+    /// retries with backoff.
+    #[error("tile {key} from {source_name}: {message}")]
+    Transient {
+        /// The tile.
+        key: TileKey,
+        /// The source's name.
+        source_name: String,
+        /// What went wrong.
+        message: String,
+        /// How long the server asked us to wait.
+        retry_after: Option<std::time::Duration>,
+    },
+    /// The load stopped because nobody wants the tile any more.
+    #[error("tile {key}: cancelled")]
+    Cancelled {
+        /// The tile.
+        key: TileKey,
     },
 }
 
@@ -29,8 +50,9 @@ pub trait TileSource: Send + Sync + 'static {
     fn name(&self) -> &str;
     /// The tiling scheme of the keys.
     fn scheme(&self) -> TilingScheme;
-    /// Loads a tile. `Ok(None)` means the source has no data there (stop refining).
-    fn load(&self, key: TileKey) -> Result<Option<Self::Tile>, SourceError>;
+    /// Loads a tile. `Ok(None)` means the source has no data there (stop refining). Slow
+    /// loads check `cancel` between steps and return [`SourceError::Cancelled`] when set.
+    fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Self::Tile>, SourceError>;
     /// Bytes a loaded tile holds in memory, for cache budgets.
     fn byte_size(&self, tile: &Self::Tile) -> usize;
 }

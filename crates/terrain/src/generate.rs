@@ -182,7 +182,7 @@ impl ProceduralPlanet {
             .map(|c| c.fields.roughness.max(c.fields.mountains))
             .fold(0.0, f64::max);
         let mesh_error = mesh_deviation(&heights_m, &rendered);
-        let bulge = self.mesh_bulge_m(&rect);
+        let bulge = crate::grid::mesh_bulge_m(self.ellipsoid(), &rect);
         let omitted = self.omitted_amplitude_m(plan.finest_m, max_weight);
         let colour = self.colour_image(&fine_pts, &fine_coarse, &raw, &rendered, &micro);
         let (min_h, max_h) = height_range(&heights_m);
@@ -292,17 +292,6 @@ impl ProceduralPlanet {
             }
         }
         out
-    }
-
-    /// How far the flat triangles between mesh vertices sag below the curved ellipsoid:
-    /// `d^2 / (8 r)` for the cell diagonal `d` and the largest radius of curvature `r`.
-    fn mesh_bulge_m(&self, rect: &GeoRect) -> f64 {
-        let e = self.ellipsoid();
-        let r_max = e.maximum_radius() * e.maximum_radius() / e.minimum_radius();
-        let cos_lat = rect.north.abs().min(rect.south.abs()).cos();
-        let ns = rect.height() / f64::from(MESH_SEGMENTS) * r_max;
-        let ew = rect.width() / f64::from(MESH_SEGMENTS) * r_max * cos_lat;
-        (ns * ns + ew * ew) / (8.0 * r_max)
     }
 
     fn colour_image(

@@ -264,9 +264,7 @@ impl Refiner {
         }
         // Everything left out: the octaves of deeper levels, at the largest amplitude here.
         let omitted = max_amp * NOISE_BOUND * q.powi(included as i32);
-        let spacing_m = rect.height() / n * radius;
-        let ew_m = rect.width() / n * radius * rect.north.abs().min(rect.south.abs()).cos();
-        let bulge = (spacing_m * spacing_m + ew_m * ew_m) / (8.0 * radius);
+        let bulge = crate::grid::mesh_bulge_m(&self.ellipsoid, &rect);
         // The measured interpolation error with a margin: midpoints see most, not all, of it.
         let geometric_error_m = 1.5 * interpolation + omitted + bulge;
 

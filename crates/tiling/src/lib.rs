@@ -11,6 +11,7 @@
 
 mod bounds;
 mod key;
+pub mod pmtiles;
 mod rect;
 mod scheme;
 pub mod select;

@@ -17,59 +17,17 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+use globus_tiling::pmtiles::{Entry, HEADER_LEN, Header, compression, encode_directory};
 use globus_tiling::{TileKey, TilingScheme};
+
+pub use globus_tiling::pmtiles::tile_id;
 use rustc_hash::FxHashMap;
 
 use super::{PyramidMetadata, TileSink, with_suffix};
 use crate::error::{Result, TilerError};
 
-/// The PMTiles tile ID of (z, x, y): the tiles of all lower zooms, then the position along
-/// the Hilbert curve of zoom z (the specification's reference algorithm).
-pub fn tile_id(z: u8, x: u32, y: u32) -> u64 {
-    let mut acc: u64 = ((1u64 << (2 * u32::from(z))) - 1) / 3;
-    let (mut x, mut y) = (i64::from(x), i64::from(y));
-    for a in (0..u32::from(z)).rev() {
-        let s = 1i64 << a;
-        let rx = s & x;
-        let ry = s & y;
-        acc += (((3 * rx) ^ ry) as u64) << a;
-        if ry == 0 {
-            if rx != 0 {
-                x = s - 1 - x;
-                y = s - 1 - y;
-            }
-            std::mem::swap(&mut x, &mut y);
-        }
-    }
-    acc
-}
-
-/// Header size in bytes.
-const HEADER_LEN: usize = 127;
-/// The header and the root directory must fit in the first 16 KiB.
+/// Header and the root directory must fit in the first 16 KiB.
 const ROOT_LIMIT: usize = 16_384 - HEADER_LEN;
-
-/// One directory entry: `run_length` consecutive tile IDs sharing the same bytes, or (with
-/// `run_length` 0) a pointer to a leaf directory.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Entry {
-    /// First tile ID.
-    pub tile_id: u64,
-    /// Offset in the tile data (or leaf directory) section.
-    pub offset: u64,
-    /// Length in bytes.
-    pub length: u32,
-    /// How many consecutive tile IDs share this data; 0 for a leaf directory.
-    pub run_length: u32,
-}
-
-fn varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push((v as u8 & 0x7f) | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
 
 fn gzip(bytes: &[u8]) -> Vec<u8> {
     let mut enc = flate2::GzBuilder::new()
@@ -82,27 +40,7 @@ fn gzip(bytes: &[u8]) -> Vec<u8> {
 
 /// A directory in the specification's column layout, gzip-compressed.
 pub fn serialize_directory(entries: &[Entry]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(entries.len() * 6);
-    varint(&mut out, entries.len() as u64);
-    let mut last = 0;
-    for e in entries {
-        varint(&mut out, e.tile_id - last);
-        last = e.tile_id;
-    }
-    for e in entries {
-        varint(&mut out, u64::from(e.run_length));
-    }
-    for e in entries {
-        varint(&mut out, u64::from(e.length));
-    }
-    for (i, e) in entries.iter().enumerate() {
-        if i > 0 && e.offset == entries[i - 1].offset + u64::from(entries[i - 1].length) {
-            varint(&mut out, 0);
-        } else {
-            varint(&mut out, e.offset + 1);
-        }
-    }
-    gzip(&out)
+    gzip(&encode_directory(entries))
 }
 
 /// The root directory and the leaf directories section for `entries` (sorted by tile ID):
@@ -230,44 +168,35 @@ impl PmTilesSink {
         let data_offset = leaf_offset + leaves.len() as u64;
         let [w, s, e, n] = meta.bounds.to_degrees();
         let e7 = |d: f64| (d * 1e7).round() as i32;
-        let mut h = Vec::with_capacity(HEADER_LEN);
-        h.extend_from_slice(b"PMTiles\x03");
-        for v in [
-            root_offset,
-            root.len() as u64,
-            meta_offset,
-            metadata.len() as u64,
-            leaf_offset,
-            leaves.len() as u64,
-            data_offset,
-            data_len,
-            st.tiles.len() as u64,
-            entries.len() as u64,
-            order.len() as u64,
-        ] {
-            h.extend_from_slice(&v.to_le_bytes());
-        }
-        let tile_type = match meta.format.as_str() {
-            "png" => 2u8,
-            "jpg" => 3,
-            "webp" => 4,
-            _ => 0,
-        };
-        // Clustered; internal compression gzip; tiles not compressed further.
-        h.extend_from_slice(&[1, 2, 1, tile_type]);
-        let (min_z, max_z) = (
+        let (min_zoom, max_zoom) = (
             meta.min_level + self.level_offset,
             meta.max_level + self.level_offset,
         );
-        h.extend_from_slice(&[min_z, max_z]);
-        for v in [e7(w), e7(s), e7(e), e7(n)] {
-            h.extend_from_slice(&v.to_le_bytes());
-        }
-        h.push(min_z.max(max_z.saturating_sub(2)));
-        for v in [e7((w + e) * 0.5), e7((s + n) * 0.5)] {
-            h.extend_from_slice(&v.to_le_bytes());
-        }
-        debug_assert_eq!(h.len(), HEADER_LEN);
+        let header = Header {
+            root: (root_offset, root.len() as u64),
+            metadata: (meta_offset, metadata.len() as u64),
+            leaves: (leaf_offset, leaves.len() as u64),
+            data: (data_offset, data_len),
+            addressed_tiles: st.tiles.len() as u64,
+            tile_entries: entries.len() as u64,
+            tile_contents: order.len() as u64,
+            clustered: true,
+            internal_compression: compression::GZIP,
+            // Tiles are stored as encoded (PNG, JPEG, WebP), not compressed further.
+            tile_compression: compression::NONE,
+            tile_type: match meta.format.as_str() {
+                "png" => 2,
+                "jpg" => 3,
+                "webp" => 4,
+                _ => 0,
+            },
+            min_zoom,
+            max_zoom,
+            bounds_e7: [e7(w), e7(s), e7(e), e7(n)],
+            centre_zoom: min_zoom.max(max_zoom.saturating_sub(2)),
+            centre_e7: [e7((w + e) * 0.5), e7((s + n) * 0.5)],
+        };
+        let h = header.to_bytes();
 
         let staging = with_suffix(&self.path, ".tmp");
         let out = File::create(&staging).map_err(|e| TilerError::output(&staging, e))?;
@@ -344,27 +273,6 @@ impl TileSink for PmTilesSink {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn tile_ids_follow_the_specification() {
-        // Values checked with the `pmtiles` Python package's zxy_to_tileid (3.8.1).
-        assert_eq!(tile_id(0, 0, 0), 0);
-        assert_eq!(tile_id(1, 0, 0), 1);
-        assert_eq!(tile_id(1, 0, 1), 2);
-        assert_eq!(tile_id(1, 1, 1), 3);
-        assert_eq!(tile_id(1, 1, 0), 4);
-        assert_eq!(tile_id(2, 0, 0), 5);
-        assert_eq!(tile_id(12, 3423, 1763), 19_078_479);
-        // Every tile of a level gets a distinct ID in the level's range.
-        let z = 5;
-        let mut ids: Vec<u64> = (0..32)
-            .flat_map(|x| (0..32).map(move |y| tile_id(z, x, y)))
-            .collect();
-        ids.sort_unstable();
-        ids.dedup();
-        assert_eq!(ids.len(), 1024);
-        assert_eq!(ids[0], (4u64.pow(5) - 1) / 3);
-    }
 
     #[test]
     fn big_directories_spill_into_leaves_and_the_root_fits() {

@@ -1,0 +1,186 @@
+//! Decoding tile bytes: PNG, JPEG and WebP images, and RGB-encoded elevation.
+//!
+//! An image's declared size is read from its header and checked against [`DecodeLimits`]
+//! before any pixel buffer is allocated, so a 60000 x 60000 PNG of a few hundred bytes is
+//! refused, not decoded.
+
+use std::io::Cursor;
+
+use globus_terrain::encoding::ElevationEncoding;
+
+/// Limits on what a tile may decode to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DecodeLimits {
+    /// Largest width or height, pixels.
+    pub max_side: u32,
+}
+
+impl Default for DecodeLimits {
+    fn default() -> Self {
+        Self { max_side: 4096 }
+    }
+}
+
+/// A decoded RGBA8 image.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Rgba {
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Row-major RGBA8, top row first.
+    pub pixels: Vec<u8>,
+}
+
+impl Rgba {
+    /// The pixel at (`x`, `y`).
+    pub fn at(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = ((y * self.width + x) * 4) as usize;
+        [
+            self.pixels[i],
+            self.pixels[i + 1],
+            self.pixels[i + 2],
+            self.pixels[i + 3],
+        ]
+    }
+}
+
+/// Decodes an image (format from its magic bytes).
+pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> {
+    let reader = || {
+        image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| format!("cannot read the image: {e}"))
+    };
+    let r = reader()?;
+    let Some(format) = r.format() else {
+        let head: String = bytes
+            .iter()
+            .take(16)
+            .map(|&b| if b.is_ascii_graphic() { char::from(b) } else { '.' })
+            .collect();
+        return Err(format!(
+            "not an image ({} bytes starting {head:?})",
+            bytes.len()
+        ));
+    };
+    if !matches!(
+        format,
+        image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::WebP
+    ) {
+        return Err(format!("{format:?} images are not read (PNG, JPEG, WebP are)"));
+    }
+    let (w, h) = r
+        .into_dimensions()
+        .map_err(|e| format!("{format:?} header: {e}"))?;
+    if w == 0 || h == 0 || w > limits.max_side || h > limits.max_side {
+        return Err(format!(
+            "{format:?} declares {w} x {h} pixels; at most {0} x {0} is accepted",
+            limits.max_side
+        ));
+    }
+    let mut r = reader()?;
+    let mut l = image::Limits::default();
+    l.max_image_width = Some(limits.max_side);
+    l.max_image_height = Some(limits.max_side);
+    l.max_alloc = Some(u64::from(limits.max_side).pow(2) * 16);
+    r.limits(l);
+    let img = r.decode().map_err(|e| format!("{format:?}: {e}"))?;
+    let rgba = img.to_rgba8();
+    Ok(Rgba {
+        width: rgba.width(),
+        height: rgba.height(),
+        pixels: rgba.into_raw(),
+    })
+}
+
+/// A decoded elevation tile: heights in metres, row-major from the north-west.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightImage {
+    /// Samples per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Metres.
+    pub heights_m: Vec<f32>,
+}
+
+/// Decodes an RGB-encoded elevation tile. Fully transparent pixels are 0 m (outside the
+/// data, as `globus tile` and most services write them).
+pub fn decode_elevation(
+    bytes: &[u8],
+    encoding: ElevationEncoding,
+    limits: DecodeLimits,
+) -> Result<HeightImage, String> {
+    let img = decode_image(bytes, limits)?;
+    let heights_m = img
+        .pixels
+        .chunks_exact(4)
+        .map(|p| {
+            if p[3] == 0 {
+                0.0
+            } else {
+                encoding.decode([p[0], p[1], p[2]]) as f32
+            }
+        })
+        .collect();
+    Ok(HeightImage {
+        width: img.width,
+        height: img.height,
+        heights_m,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png(w: u32, h: u32, rgba: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut enc = png::Encoder::new(&mut out, w, h);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut wr = enc.write_header().unwrap();
+        wr.write_image_data(rgba).unwrap();
+        wr.finish().unwrap();
+        out
+    }
+
+    #[test]
+    fn decodes_elevation_and_refuses_absurd_sizes_before_allocating() {
+        let e = ElevationEncoding::Terrarium;
+        let mut px = Vec::new();
+        for h in [0.0, 1234.5, -20.0, 8848.0] {
+            let [r, g, b] = e.encode(h);
+            px.extend_from_slice(&[r, g, b, 255]);
+        }
+        let img = decode_elevation(&png(2, 2, &px), e, DecodeLimits::default()).unwrap();
+        assert_eq!((img.width, img.height), (2, 2));
+        for (got, want) in img.heights_m.iter().zip([0.0, 1234.5, -20.0, 8848.0]) {
+            assert!((f64::from(*got) - want).abs() <= e.step_m(), "{got} vs {want}");
+        }
+        // A real 1 x 1 PNG whose header is edited to claim 60000 x 60000: the header check
+        // refuses it (the CRC no longer matches, so patch it too).
+        let mut huge = png(1, 1, &[1, 2, 3, 255]);
+        huge[16..20].copy_from_slice(&60_000u32.to_be_bytes());
+        huge[20..24].copy_from_slice(&60_000u32.to_be_bytes());
+        let crc = crc32(&huge[12..29]);
+        huge[29..33].copy_from_slice(&crc.to_be_bytes());
+        let err = decode_image(&huge, DecodeLimits::default()).unwrap_err();
+        assert!(err.contains("60000 x 60000"), "{err}");
+        let err = decode_image(b"<html>503</html>", DecodeLimits::default()).unwrap_err();
+        assert!(err.contains("not an image"), "{err}");
+        assert!(decode_image(&px, DecodeLimits::default()).is_err());
+    }
+
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+        }
+        !c
+    }
+}

@@ -1,0 +1,295 @@
+//! PMTiles v3 archives, read by byte ranges from a local file or over HTTP range requests.
+//!
+//! Opening reads the first 16 KiB (header and, in a well-formed archive, the root directory)
+//! and the metadata; a tile then costs one range read, plus one per leaf directory not yet
+//! cached. Geographic pyramids written by `globus tile` sit one level down in the archive
+//! (`"pmtiles_level_offset": 1` in the metadata), which is honoured here.
+//!
+//! Everything read is untrusted: lengths are capped, decompression is bounded, leaf
+//! directories nest at most four deep.
+
+use std::fs::File;
+use std::io::Read;
+use std::os::unix::fs::FileExt;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use globus_tiling::pmtiles::{Entry, HEADER_LEN, Header, compression, decode_directory, find_entry, tile_id};
+use globus_tiling::{TileKey, TilingScheme};
+use rustc_hash::FxHashMap;
+
+use super::{Cancel, Fetch, FetchError, Fetched, HttpClient};
+
+/// Largest directory, metadata or tile accepted, bytes (compressed or not).
+const MAX_PART_BYTES: u64 = 64 << 20;
+/// Leaf directories kept decoded.
+const LEAF_CACHE: usize = 64;
+
+/// Random access to an archive's bytes.
+pub trait RangeRead: Send + Sync + 'static {
+    /// The file or URL.
+    fn name(&self) -> &str;
+    /// `len` bytes at `offset`.
+    fn read_range(&self, offset: u64, len: u64, cancel: &Cancel) -> Result<Vec<u8>, FetchError>;
+}
+
+/// A local archive.
+pub struct FileRange {
+    file: File,
+    name: String,
+    len: u64,
+}
+
+impl FileRange {
+    /// Opens `path`.
+    pub fn open(path: &Path) -> Result<Self, String> {
+        let file = File::open(path).map_err(|e| format!("PMTiles {}: {e}", path.display()))?;
+        let len = file
+            .metadata()
+            .map_err(|e| format!("PMTiles {}: {e}", path.display()))?
+            .len();
+        Ok(Self {
+            file,
+            name: path.display().to_string(),
+            len,
+        })
+    }
+}
+
+impl RangeRead for FileRange {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn read_range(&self, offset: u64, len: u64, _cancel: &Cancel) -> Result<Vec<u8>, FetchError> {
+        let end = offset.checked_add(len).filter(|&e| e <= self.len).ok_or_else(|| {
+            FetchError::Permanent(format!(
+                "{}: range {offset}+{len} beyond the file's {} bytes",
+                self.name, self.len
+            ))
+        })?;
+        let mut buf = vec![0u8; (end - offset) as usize];
+        self.file
+            .read_exact_at(&mut buf, offset)
+            .map_err(|e| FetchError::transient(format!("{}: {e}", self.name)))?;
+        Ok(buf)
+    }
+}
+
+/// An archive on a web server that answers range requests.
+pub struct HttpRange {
+    client: Arc<HttpClient>,
+    url: String,
+}
+
+impl HttpRange {
+    /// The archive at `url`.
+    pub fn new(client: Arc<HttpClient>, url: &str) -> Self {
+        Self {
+            client,
+            url: url.to_string(),
+        }
+    }
+}
+
+impl RangeRead for HttpRange {
+    fn name(&self) -> &str {
+        &self.url
+    }
+
+    fn read_range(&self, offset: u64, len: u64, cancel: &Cancel) -> Result<Vec<u8>, FetchError> {
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        let body = self
+            .client
+            .get(&self.url, Some((offset, offset + len - 1)), cancel)?
+            .ok_or_else(|| FetchError::Permanent(format!("{}: not found", self.url)))?;
+        let mut bytes = body.fetched.bytes;
+        if body.status == 200 {
+            // The server ignored the range and sent the whole file.
+            let end = offset.saturating_add(len).min(bytes.len() as u64) as usize;
+            let start = (offset as usize).min(end);
+            bytes = bytes[start..end].to_vec();
+        }
+        if (bytes.len() as u64) < len.min(MAX_PART_BYTES) && body.status == 206 {
+            return Err(FetchError::transient(format!(
+                "{}: asked for {len} bytes at {offset}, got {}",
+                self.url,
+                bytes.len()
+            )));
+        }
+        Ok(bytes)
+    }
+}
+
+/// Reads tiles from a PMTiles v3 archive.
+pub struct PmTilesFetch<R: RangeRead> {
+    reader: R,
+    header: Header,
+    root: Vec<Entry>,
+    metadata: serde_json::Value,
+    level_offset: u8,
+    scheme: TilingScheme,
+    leaves: Mutex<FxHashMap<u64, Arc<Vec<Entry>>>>,
+}
+
+fn inflate(name: &str, what: &str, bytes: &[u8], codec: u8) -> Result<Vec<u8>, FetchError> {
+    match codec {
+        compression::NONE | compression::UNKNOWN => Ok(bytes.to_vec()),
+        compression::GZIP => {
+            let mut out = Vec::new();
+            flate2::read::GzDecoder::new(bytes)
+                .take(MAX_PART_BYTES + 1)
+                .read_to_end(&mut out)
+                .map_err(|e| FetchError::Permanent(format!("{name}: {what}: gzip: {e}")))?;
+            if out.len() as u64 > MAX_PART_BYTES {
+                return Err(FetchError::Permanent(format!(
+                    "{name}: {what} inflates past {MAX_PART_BYTES} bytes"
+                )));
+            }
+            Ok(out)
+        }
+        other => Err(FetchError::Permanent(format!(
+            "{name}: {what} uses compression {other} (only none and gzip are read)"
+        ))),
+    }
+}
+
+impl<R: RangeRead> PmTilesFetch<R> {
+    /// Opens the archive behind `reader`.
+    pub fn open(reader: R) -> Result<Self, String> {
+        let cancel = Cancel::new();
+        let name = reader.name().to_string();
+        let e = |e: FetchError| format!("{name}: {e}");
+        let head = reader.read_range(0, HEADER_LEN as u64, &cancel).map_err(e)?;
+        let header = Header::parse(&head).map_err(|m| format!("{name}: {m}"))?;
+        let part = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, String> {
+            if len > MAX_PART_BYTES {
+                return Err(format!("{name}: {what} of {len} bytes is too large"));
+            }
+            let raw = reader.read_range(offset, len, &cancel).map_err(e)?;
+            inflate(&name, what, &raw, header.internal_compression).map_err(e)
+        };
+        let root = decode_directory(&part(header.root, "root directory")?)
+            .map_err(|m| format!("{name}: root directory: {m}"))?;
+        let metadata: serde_json::Value = if header.metadata.1 == 0 {
+            serde_json::Value::Null
+        } else {
+            serde_json::from_slice(&part(header.metadata, "metadata")?)
+                .map_err(|m| format!("{name}: metadata: {m}"))?
+        };
+        let scheme = metadata["scheme"]
+            .as_str()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(TilingScheme::WebMercator);
+        let level_offset = match (scheme, metadata["pmtiles_level_offset"].as_u64()) {
+            (_, Some(n)) if n <= 1 => n as u8,
+            (TilingScheme::Geographic, None) => 1,
+            (_, None) => 0,
+            (_, Some(n)) => return Err(format!("{name}: pmtiles_level_offset {n} is not 0 or 1")),
+        };
+        Ok(Self {
+            reader,
+            header,
+            root,
+            metadata,
+            level_offset,
+            scheme,
+            leaves: Mutex::new(FxHashMap::default()),
+        })
+    }
+
+    /// The header.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The JSON metadata.
+    pub fn metadata(&self) -> &serde_json::Value {
+        &self.metadata
+    }
+
+    /// The tiling scheme of the pyramid inside.
+    pub fn scheme(&self) -> TilingScheme {
+        self.scheme
+    }
+
+    /// The pyramid's levels (archive zooms less the level offset).
+    pub fn levels(&self) -> (u8, u8) {
+        (
+            self.header.min_zoom.saturating_sub(self.level_offset),
+            self.header.max_zoom.saturating_sub(self.level_offset),
+        )
+    }
+
+    fn leaf(&self, offset: u64, length: u32, cancel: &Cancel) -> Result<Arc<Vec<Entry>>, FetchError> {
+        if let Some(d) = self.lock_leaves().get(&offset) {
+            return Ok(Arc::clone(d));
+        }
+        let name = self.reader.name();
+        let (base, section) = self.header.leaves;
+        if offset.saturating_add(u64::from(length)) > section {
+            return Err(FetchError::Permanent(format!(
+                "{name}: leaf directory at {offset} lies outside the leaf section"
+            )));
+        }
+        let raw = self.reader.read_range(base + offset, u64::from(length), cancel)?;
+        let bytes = inflate(name, "leaf directory", &raw, self.header.internal_compression)?;
+        let dir = Arc::new(
+            decode_directory(&bytes)
+                .map_err(|m| FetchError::Permanent(format!("{name}: leaf directory: {m}")))?,
+        );
+        let mut leaves = self.lock_leaves();
+        if leaves.len() >= LEAF_CACHE {
+            leaves.clear();
+        }
+        leaves.insert(offset, Arc::clone(&dir));
+        Ok(dir)
+    }
+
+    fn lock_leaves(&self) -> std::sync::MutexGuard<'_, FxHashMap<u64, Arc<Vec<Entry>>>> {
+        self.leaves.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+impl<R: RangeRead> Fetch for PmTilesFetch<R> {
+    fn name(&self) -> &str {
+        self.reader.name()
+    }
+
+    fn fetch(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Fetched>, FetchError> {
+        let z = key.level() + self.level_offset;
+        if z > 31 {
+            return Ok(None);
+        }
+        let id = tile_id(z, key.x(), key.y());
+        let mut entry = find_entry(&self.root, id);
+        for _ in 0..4 {
+            match entry {
+                Some(e) if e.run_length == 0 => {
+                    let dir = self.leaf(e.offset, e.length, cancel)?;
+                    entry = find_entry(&dir, id);
+                }
+                _ => break,
+            }
+        }
+        let Some(e) = entry.filter(|e| e.run_length > 0) else {
+            return Ok(None);
+        };
+        let name = self.reader.name();
+        if u64::from(e.length) > MAX_PART_BYTES
+            || e.offset.saturating_add(u64::from(e.length)) > self.header.data.1
+        {
+            return Err(FetchError::Permanent(format!(
+                "{name} tile {key}: entry ({} bytes at {}) lies outside the data section",
+                e.length, e.offset
+            )));
+        }
+        let raw = self
+            .reader
+            .read_range(self.header.data.0 + e.offset, u64::from(e.length), cancel)?;
+        let bytes = inflate(name, "tile", &raw, self.header.tile_compression)?;
+        Ok((!bytes.is_empty()).then(|| Fetched::local(bytes)))
+    }
+}

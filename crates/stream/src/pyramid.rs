@@ -1,0 +1,246 @@
+//! A raster pyramid read through a [`Fetch`]: its layout, a small cache of decoded tiles, and
+//! sampling at any longitude and latitude, so engine tiles (geographic) can be built from
+//! pyramids of either scheme and of any tile size (Web Mercator is reprojected here).
+
+use std::f64::consts::PI;
+use std::sync::{Arc, Mutex};
+
+use globus_tiling::{GeoRect, TileKey, TilingScheme, lat_to_mercator_y};
+use rustc_hash::FxHashMap;
+
+use crate::fetch::{Cancel, Fetch, FetchError};
+
+/// Where a tile's samples lie.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleGrid {
+    /// Sample `i` of `n` at `i / (n - 1)` of the tile: edges shared with the neighbours
+    /// (`globus tile` elevation).
+    Corners,
+    /// Pixel `i` of `n` covers `[i, i + 1] / n` (ordinary images, most elevation services).
+    Cells,
+}
+
+/// What a pyramid holds and where.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PyramidSpec {
+    /// The tiling scheme of its keys.
+    pub scheme: TilingScheme,
+    /// Shallowest level.
+    pub min_level: u8,
+    /// Deepest level.
+    pub max_level: u8,
+    /// Samples per tile side.
+    pub tile_size: u32,
+    /// Sample registration.
+    pub grid: SampleGrid,
+    /// Where it has data.
+    pub bounds: GeoRect,
+}
+
+impl PyramidSpec {
+    /// The level whose sample spacing is closest to (not coarser than) `spacing_rad` of
+    /// latitude at the equator, clamped to the pyramid's levels.
+    pub fn level_for_spacing(&self, spacing_rad: f64) -> u8 {
+        let span0 = match self.scheme {
+            TilingScheme::Geographic => PI,
+            TilingScheme::WebMercator => 2.0 * PI,
+        };
+        let per_tile = f64::from(self.tile_size.max(2) - u32::from(self.grid == SampleGrid::Corners));
+        let level = (span0 / per_tile / spacing_rad).log2().ceil();
+        (level.max(0.0) as u8).clamp(self.min_level, self.max_level)
+    }
+
+    /// The tile and its fractional sample coordinates (x east, y south, in samples) holding
+    /// a longitude and latitude at `level`. Web Mercator clamps latitude to its square.
+    pub fn locate(&self, lon_rad: f64, lat_rad: f64, level: u8) -> Option<(TileKey, f64, f64)> {
+        let nx = self.scheme.tiles_x(level) as f64;
+        let ny = self.scheme.tiles_y(level) as f64;
+        let fx = ((lon_rad + PI) / (2.0 * PI)).clamp(0.0, 1.0) * nx;
+        let fy = match self.scheme {
+            TilingScheme::Geographic => (PI / 2.0 - lat_rad) / PI,
+            TilingScheme::WebMercator => lat_to_mercator_y(lat_rad.clamp(-1.5, 1.5)),
+        }
+        .clamp(0.0, 1.0)
+            * ny;
+        let tx = (fx.floor()).min(nx - 1.0).max(0.0);
+        let ty = (fy.floor()).min(ny - 1.0).max(0.0);
+        let key = self.scheme.key(level, tx as u32, ty as u32)?;
+        let n = f64::from(self.tile_size);
+        let (u, v) = (fx - tx, fy - ty);
+        let (px, py) = match self.grid {
+            SampleGrid::Corners => (u * (n - 1.0), v * (n - 1.0)),
+            SampleGrid::Cells => (
+                (u * n - 0.5).clamp(0.0, n - 1.0),
+                (v * n - 0.5).clamp(0.0, n - 1.0),
+            ),
+        };
+        Some((key, px, py))
+    }
+}
+
+/// Samples of one decoded tile that can be interpolated.
+pub trait Samples: Send + Sync + 'static {
+    /// Width and height, samples.
+    fn size(&self) -> (u32, u32);
+    /// Bytes held.
+    fn byte_size(&self) -> usize;
+}
+
+impl Samples for crate::decode::HeightImage {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+    fn byte_size(&self) -> usize {
+        self.heights_m.len() * 4
+    }
+}
+
+impl Samples for crate::decode::Rgba {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+    fn byte_size(&self) -> usize {
+        self.pixels.len()
+    }
+}
+
+type Decoder<T> = dyn Fn(&[u8]) -> Result<T, String> + Send + Sync;
+
+/// A pyramid of decoded tiles of type `T`.
+pub struct RasterPyramid<T: Samples> {
+    fetch: Arc<dyn Fetch>,
+    spec: PyramidSpec,
+    decode: Box<Decoder<T>>,
+    cache: Mutex<(FxHashMap<TileKey, (Option<Arc<T>>, u64)>, u64)>,
+    cache_tiles: usize,
+}
+
+impl<T: Samples> RasterPyramid<T> {
+    /// A pyramid read through `fetch`, decoded by `decode`, keeping up to `cache_tiles`
+    /// decoded tiles (neighbouring engine tiles share source tiles when schemes or levels
+    /// differ).
+    pub fn new(
+        fetch: Arc<dyn Fetch>,
+        spec: PyramidSpec,
+        decode: Box<Decoder<T>>,
+        cache_tiles: usize,
+    ) -> Self {
+        Self {
+            fetch,
+            spec,
+            decode,
+            cache: Mutex::new((FxHashMap::default(), 0)),
+            cache_tiles: cache_tiles.max(4),
+        }
+    }
+
+    /// The layout.
+    pub fn spec(&self) -> &PyramidSpec {
+        &self.spec
+    }
+
+    /// The fetcher's name.
+    pub fn name(&self) -> &str {
+        self.fetch.name()
+    }
+
+    /// A decoded tile, `None` where the pyramid has none.
+    pub fn tile(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
+        {
+            let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
+            c.1 += 1;
+            let now = c.1;
+            if let Some(e) = c.0.get_mut(&key) {
+                e.1 = now;
+                return Ok(e.0.clone());
+            }
+        }
+        let tile = match self.fetch.fetch(key, cancel)? {
+            None => None,
+            Some(f) => Some(Arc::new((self.decode)(&f.bytes).map_err(|m| {
+                FetchError::Permanent(format!("{} tile {key}: {m}", self.fetch.name()))
+            })?)),
+        };
+        if let Some(t) = &tile {
+            let (w, h) = t.size();
+            if w != self.spec.tile_size || h != self.spec.tile_size {
+                return Err(FetchError::Permanent(format!(
+                    "{} tile {key}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
+                    self.fetch.name(),
+                    self.spec.tile_size
+                )));
+            }
+        }
+        let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
+        c.1 += 1;
+        let now = c.1;
+        if c.0.len() >= self.cache_tiles {
+            // Drop the older half.
+            let mut stamps: Vec<u64> = c.0.values().map(|e| e.1).collect();
+            stamps.sort_unstable();
+            let cut = stamps[stamps.len() / 2];
+            c.0.retain(|_, e| e.1 > cut);
+        }
+        c.0.insert(key, (tile.clone(), now));
+        Ok(tile)
+    }
+}
+
+/// Bilinear interpolation of `get(x, y)` at fractional sample coordinates.
+pub fn bilinear(px: f64, py: f64, w: u32, h: u32, get: impl Fn(u32, u32) -> f64) -> f64 {
+    let x0 = (px.floor().max(0.0) as u32).min(w - 1);
+    let y0 = (py.floor().max(0.0) as u32).min(h - 1);
+    let x1 = (x0 + 1).min(w - 1);
+    let y1 = (y0 + 1).min(h - 1);
+    let (fx, fy) = (px - f64::from(x0), py - f64::from(y0));
+    let top = get(x0, y0) * (1.0 - fx) + get(x1, y0) * fx;
+    let bottom = get(x0, y1) * (1.0 - fx) + get(x1, y1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(scheme: TilingScheme, grid: SampleGrid) -> PyramidSpec {
+        PyramidSpec {
+            scheme,
+            min_level: 0,
+            max_level: 12,
+            tile_size: 256,
+            grid,
+            bounds: GeoRect::WORLD,
+        }
+    }
+
+    #[test]
+    fn locates_samples_in_both_schemes() {
+        let g = spec(TilingScheme::Geographic, SampleGrid::Corners);
+        // Geographic level 1: tile (2, 0) spans 0..90 E, 0..90 N; its centre is sample 127.5.
+        let (k, x, y) = g.locate(45f64.to_radians(), 45f64.to_radians(), 1).unwrap();
+        assert_eq!(k, TileKey::new(1, 2, 0));
+        assert!((x - 127.5).abs() < 1e-9 && (y - 127.5).abs() < 1e-9);
+        let m = spec(TilingScheme::WebMercator, SampleGrid::Cells);
+        // Web Mercator level 1: 45 N lies at mercator fraction 0.3597 of the square, so at
+        // 0.7194 of tile (1, 0), pixel 0.7194 * 256 - 0.5.
+        let (k, x, y) = m.locate(45f64.to_radians(), 45f64.to_radians(), 1).unwrap();
+        assert_eq!(k, TileKey::new(1, 1, 0));
+        let want = (lat_to_mercator_y(45f64.to_radians()) * 2.0) * 256.0 - 0.5;
+        assert!((y - want).abs() < 1e-9 && (x - (0.25 * 256.0 - 0.5)).abs() < 1e-9);
+        // Beyond the Mercator square: the edge row, not a wrap.
+        let (_, _, y) = m.locate(0.0, 89f64.to_radians(), 3).unwrap();
+        assert_eq!(y, 0.0);
+        // Spacing to level: geographic 256-sample corner tiles at level 3 are 22.5/255 deg apart.
+        let spacing = (22.5f64 / 255.0).to_radians();
+        assert_eq!(g.level_for_spacing(spacing), 3);
+        assert_eq!(g.level_for_spacing(spacing * 0.99), 4);
+        assert_eq!(g.level_for_spacing(1e-12), 12);
+    }
+
+    #[test]
+    fn bilinear_interpolates_and_clamps() {
+        let get = |x: u32, y: u32| f64::from(x * 10 + y);
+        assert!((bilinear(0.5, 0.5, 4, 4, get) - 5.5).abs() < 1e-12);
+        assert!((bilinear(3.0, 3.0, 4, 4, get) - 33.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,389 @@
+//! [`RasterTerrainSource`]: engine terrain tiles built from elevation pyramids (Terrarium,
+//! Terrain-RGB, centimetre; geographic or Web Mercator; corner or cell grids) and draped
+//! with imagery pyramids.
+//!
+//! * **Elevation** layers stack bottom to top: each mesh sample takes its height from the
+//!   topmost layer whose bounds hold it and which has a tile there (so an SRTM square over a
+//!   coarse world DEM shows its detail where it exists). Each layer is read at the level whose
+//!   samples are at least four times finer than the mesh (or its deepest), so the tile's
+//!   geometric error is measured against real data: the mesh against the data on a 4x finer
+//!   grid, times 1.5, plus the body's curvature between vertices.
+//! * A tile is "no data" (refinement takes over, see [`crate::RefinedSource`]) once no layer
+//!   holds data finer than its mesh; shallower tiles always load.
+//! * **Imagery** layers are composited bottom to top with alpha into the tile's colour image,
+//!   each read at the level matching the tile's texel size (Web Mercator reprojected per
+//!   texel; beyond its 85 degree limit the edge row). Without imagery, heights are tinted.
+//! * The one-sample ring round the grid (for normals) is extrapolated linearly from inside:
+//!   neighbours' tiles are not fetched for it.
+
+use std::sync::Arc;
+
+use globus_geo::Ellipsoid;
+use globus_terrain::grid::{
+    COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, mesh_bulge_m, mesh_height_at,
+};
+use globus_terrain::{ColourImage, MeshOptions, TerrainTile};
+use globus_tiling::{GeoRect, TileKey, TilingScheme};
+use rustc_hash::FxHashMap;
+
+use crate::decode::{HeightImage, Rgba};
+use crate::fetch::{Cancel, FetchError};
+use crate::pyramid::{RasterPyramid, Samples, bilinear};
+use crate::{SourceError, TerrainData, TerrainSource, TileSource};
+
+/// Mesh samples are checked against data this many times finer.
+const OVERSAMPLE: u32 = 4;
+
+/// Terrain from elevation pyramids, draped with imagery pyramids.
+pub struct RasterTerrainSource {
+    name: String,
+    elevation: Vec<Arc<RasterPyramid<HeightImage>>>,
+    imagery: Vec<Arc<RasterPyramid<Rgba>>>,
+    ellipsoid: Ellipsoid,
+    occluder: Ellipsoid,
+    height_range_m: (f64, f64),
+    mesh_options: MeshOptions,
+    max_level: u8,
+}
+
+fn intersects(a: &GeoRect, b: &GeoRect) -> bool {
+    a.west < b.east && b.west < a.east && a.south < b.north && b.south < a.north
+}
+
+fn inside(r: &GeoRect, lon: f64, lat: f64) -> bool {
+    let eps = 1e-12;
+    lon >= r.west - eps && lon <= r.east + eps && lat >= r.south - eps && lat <= r.north + eps
+}
+
+/// Sample spacing (radians of latitude at the equator) of a pyramid's deepest level.
+fn finest_spacing(p: &RasterPyramid<impl Samples>) -> f64 {
+    let s = p.spec();
+    let span0 = match s.scheme {
+        TilingScheme::Geographic => std::f64::consts::PI,
+        TilingScheme::WebMercator => 2.0 * std::f64::consts::PI,
+    };
+    span0 / f64::from(s.tile_size.max(2)) / f64::from(1u32 << s.max_level.min(30))
+}
+
+/// Decoded tiles one load touches, fetched once each.
+struct Touched<'a, T: Samples> {
+    pyramid: &'a RasterPyramid<T>,
+    tiles: FxHashMap<TileKey, Option<Arc<T>>>,
+}
+
+impl<'a, T: Samples> Touched<'a, T> {
+    fn new(pyramid: &'a RasterPyramid<T>) -> Self {
+        Self {
+            pyramid,
+            tiles: FxHashMap::default(),
+        }
+    }
+
+    fn get(&mut self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
+        if let Some(t) = self.tiles.get(&key) {
+            return Ok(t.clone());
+        }
+        let t = self.pyramid.tile(key, cancel)?;
+        self.tiles.insert(key, t.clone());
+        Ok(t)
+    }
+}
+
+impl RasterTerrainSource {
+    /// Terrain on `ellipsoid` from `elevation` layers (bottom first), draped with `imagery`
+    /// layers (bottom first). `height_range_m` bounds the heights of tiles not loaded yet.
+    pub fn new(
+        elevation: Vec<Arc<RasterPyramid<HeightImage>>>,
+        imagery: Vec<Arc<RasterPyramid<Rgba>>>,
+        ellipsoid: Ellipsoid,
+        height_range_m: (f64, f64),
+        mesh_options: MeshOptions,
+    ) -> Result<Self, String> {
+        if elevation.is_empty() {
+            return Err("no elevation layer given".into());
+        }
+        // The deepest engine level whose mesh is still coarser than some layer's data.
+        let finest = elevation
+            .iter()
+            .map(|p| finest_spacing(p))
+            .fold(f64::INFINITY, f64::min);
+        let mesh0 = std::f64::consts::PI / f64::from(MESH_SEGMENTS);
+        let max_level = ((mesh0 / finest).log2().round().max(0.0) as u8).min(TileKey::MAX_LEVEL);
+        let names: Vec<&str> = elevation
+            .iter()
+            .map(|p| p.name())
+            .chain(imagery.iter().map(|p| p.name()))
+            .collect();
+        Ok(Self {
+            name: names.join(" + "),
+            elevation,
+            imagery,
+            occluder: ellipsoid.grown(height_range_m.0.min(0.0)),
+            ellipsoid,
+            height_range_m,
+            mesh_options,
+            max_level,
+        })
+    }
+
+    fn fail(&self, key: TileKey, e: FetchError) -> SourceError {
+        match e {
+            FetchError::Transient {
+                message,
+                retry_after,
+            } => SourceError::Transient {
+                key,
+                source_name: self.name.clone(),
+                message,
+                retry_after,
+            },
+            FetchError::Permanent(message) => SourceError::Failed {
+                key,
+                source_name: self.name.clone(),
+                message,
+            },
+            FetchError::Cancelled => SourceError::Cancelled { key },
+        }
+    }
+
+    /// Heights of the 4x oversampled grid (and the mesh grid inside it), or `None` if no
+    /// layer holds data finer than this tile's mesh.
+    fn heights(
+        &self,
+        key: TileKey,
+        rect: &GeoRect,
+        cancel: &Cancel,
+    ) -> Result<Option<Vec<f64>>, FetchError> {
+        let mesh_spacing = rect.height() / f64::from(MESH_SEGMENTS);
+        // Layers that reach this tile, with the level each is read at.
+        let mut layers = Vec::new();
+        let mut detailed = false;
+        for p in &self.elevation {
+            let s = p.spec();
+            if !intersects(rect, &s.bounds) {
+                continue;
+            }
+            detailed |= finest_spacing(p) < mesh_spacing * 0.75;
+            let level = s.level_for_spacing(mesh_spacing / f64::from(OVERSAMPLE));
+            layers.push((Touched::new(p), level));
+        }
+        if !detailed && key.level() > 0 {
+            return Ok(None);
+        }
+        let side = (MESH_SEGMENTS * OVERSAMPLE + 1) as usize;
+        let n = f64::from(MESH_SEGMENTS * OVERSAMPLE);
+        let mut out = Vec::with_capacity(side * side);
+        for j in 0..side {
+            for i in 0..side {
+                let (lon, lat) = rect.lon_lat_at(i as f64 / n, j as f64 / n);
+                let mut h = 0.0;
+                for (touched, level) in layers.iter_mut().rev() {
+                    let spec = *touched.pyramid.spec();
+                    if !inside(&spec.bounds, lon, lat) {
+                        continue;
+                    }
+                    let Some((k, px, py)) = spec.locate(lon, lat, *level) else {
+                        continue;
+                    };
+                    if let Some(t) = touched.get(k, cancel)? {
+                        h = bilinear(px, py, t.width, t.height, |x, y| {
+                            f64::from(t.heights_m[(y * t.width + x) as usize])
+                        });
+                        break;
+                    }
+                }
+                out.push(h);
+            }
+            if cancel.is_cancelled() {
+                return Err(FetchError::Cancelled);
+            }
+        }
+        Ok(Some(out))
+    }
+
+    fn colour(&self, rect: &GeoRect, heights: &[f32], cancel: &Cancel) -> Result<ColourImage, FetchError> {
+        let size = COLOUR_SIZE as usize;
+        let texel = rect.height() / f64::from(COLOUR_SIZE);
+        let mut px = vec![0u8; size * size * 4];
+        if self.imagery.is_empty() {
+            for ty in 0..size {
+                for tx in 0..size {
+                    let x = (tx as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
+                    let y = (ty as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
+                    let c = tint(mesh_height_at(heights, x, y));
+                    px[(ty * size + tx) * 4..][..4].copy_from_slice(&c);
+                }
+            }
+            return Ok(ColourImage::with_mips(COLOUR_SIZE, px));
+        }
+        let mut acc = vec![[0f64; 3]; size * size];
+        for p in &self.imagery {
+            let spec = *p.spec();
+            if !intersects(rect, &spec.bounds) {
+                continue;
+            }
+            let level = spec.level_for_spacing(texel);
+            let mut touched = Touched::new(p);
+            for ty in 0..size {
+                for tx in 0..size {
+                    let (lon, lat) = rect.lon_lat_at(
+                        (tx as f64 + 0.5) / size as f64,
+                        (ty as f64 + 0.5) / size as f64,
+                    );
+                    if !inside(&spec.bounds, lon, lat) {
+                        continue;
+                    }
+                    let Some((k, x, y)) = spec.locate(lon, lat, level) else {
+                        continue;
+                    };
+                    let Some(t) = touched.get(k, cancel)? else {
+                        continue;
+                    };
+                    let ch = |c: usize| {
+                        bilinear(x, y, t.width, t.height, |a, b| {
+                            let p = t.at(a, b);
+                            f64::from(p[c]) * f64::from(p[3]) / 255.0
+                        })
+                    };
+                    let alpha = ch(3) / 255.0;
+                    let a = &mut acc[ty * size + tx];
+                    for (c, v) in a.iter_mut().enumerate() {
+                        // Premultiplied "over".
+                        *v = ch(c) + *v * (1.0 - alpha);
+                    }
+                }
+            }
+        }
+        for (i, a) in acc.iter().enumerate() {
+            px[i * 4] = a[0].round().clamp(0.0, 255.0) as u8;
+            px[i * 4 + 1] = a[1].round().clamp(0.0, 255.0) as u8;
+            px[i * 4 + 2] = a[2].round().clamp(0.0, 255.0) as u8;
+            px[i * 4 + 3] = 255;
+        }
+        Ok(ColourImage::with_mips(COLOUR_SIZE, px))
+    }
+
+    fn build(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainTile>, FetchError> {
+        let rect = TilingScheme::Geographic.rect(key);
+        let Some(fine) = self.heights(key, &rect, cancel)? else {
+            return Ok(None);
+        };
+        let side = (MESH_SEGMENTS * OVERSAMPLE + 1) as usize;
+        let o = OVERSAMPLE as usize;
+        let fine_at = |i: usize, j: usize| fine[j * side + i];
+        // Mesh samples are every OVERSAMPLE-th fine sample; the ring outside the tile
+        // continues the slope of the outermost cell.
+        let last = MESH_SEGMENTS as i32;
+        let m = |i: i32, j: i32| fine_at(i as usize * o, j as usize * o);
+        let side_of = |v: i32| match v {
+            v if v < 0 => (0, 1),
+            v if v > last => (last, -1),
+            v => (v, 0),
+        };
+        let g = HEIGHT_GRID_SIDE;
+        let mut heights = Vec::with_capacity(g * g);
+        for j in -1..=last + 1 {
+            for i in -1..=last + 1 {
+                let ((ci, di), (cj, dj)) = (side_of(i), side_of(j));
+                let base = m(ci, cj);
+                let mut h = base;
+                if di != 0 {
+                    h += base - m(ci + di, cj);
+                }
+                if dj != 0 {
+                    h += base - m(ci, cj + dj);
+                }
+                heights.push(h as f32);
+            }
+        }
+        let mut deviation: f64 = 0.0;
+        for j in 0..side {
+            for i in 0..side {
+                let mesh = mesh_height_at(&heights, i as f64 / o as f64, j as f64 / o as f64);
+                deviation = deviation.max((fine_at(i, j) - mesh).abs());
+            }
+        }
+        let colour = self.colour(&rect, &heights, cancel)?;
+        let (lo, hi) = heights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+                (a.min(f64::from(h)), b.max(f64::from(h)))
+            });
+        let radius = self.ellipsoid.mean_radius();
+        Ok(Some(TerrainTile {
+            key,
+            rect,
+            heights_m: heights,
+            colour,
+            geometric_error_m: 1.5 * deviation + mesh_bulge_m(&self.ellipsoid, &rect),
+            texel_size_m: rect.height() * radius / f64::from(COLOUR_SIZE),
+            min_height_m: lo,
+            max_height_m: hi,
+        }))
+    }
+}
+
+/// A hypsometric tint for terrain without imagery: sea blue, lowland green, brown, rock grey,
+/// snow above 4500 m.
+fn tint(h: f64) -> [u8; 4] {
+    const STOPS: [(f64, [f64; 3]); 6] = [
+        (-500.0, [30.0, 60.0, 120.0]),
+        (0.5, [60.0, 110.0, 160.0]),
+        (1.0, [80.0, 130.0, 70.0]),
+        (800.0, [150.0, 140.0, 90.0]),
+        (2500.0, [130.0, 115.0, 100.0]),
+        (4500.0, [240.0, 240.0, 245.0]),
+    ];
+    let mut c = STOPS[STOPS.len() - 1].1;
+    for w in STOPS.windows(2) {
+        let ((h0, c0), (h1, c1)) = (w[0], w[1]);
+        if h < h1 {
+            let t = ((h - h0) / (h1 - h0)).clamp(0.0, 1.0);
+            c = [0, 1, 2].map(|k| c0[k] + (c1[k] - c0[k]) * t);
+            break;
+        }
+    }
+    [c[0] as u8, c[1] as u8, c[2] as u8, 255]
+}
+
+impl TileSource for RasterTerrainSource {
+    type Tile = TerrainData;
+
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn scheme(&self) -> TilingScheme {
+        TilingScheme::Geographic
+    }
+
+    fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
+        if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
+            return Ok(None);
+        }
+        let tile = self.build(key, cancel).map_err(|e| self.fail(key, e))?;
+        Ok(tile.map(|t| TerrainData::build(t, &self.ellipsoid, &self.occluder, &self.mesh_options)))
+    }
+
+    fn byte_size(&self, tile: &TerrainData) -> usize {
+        tile.byte_size()
+    }
+}
+
+impl TerrainSource for RasterTerrainSource {
+    fn ellipsoid(&self) -> &Ellipsoid {
+        &self.ellipsoid
+    }
+
+    fn occluder(&self) -> &Ellipsoid {
+        &self.occluder
+    }
+
+    fn height_range_m(&self) -> (f64, f64) {
+        self.height_range_m
+    }
+
+    fn max_level(&self) -> u8 {
+        self.max_level
+    }
+}
