@@ -57,7 +57,13 @@ pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> 
         let head: String = bytes
             .iter()
             .take(16)
-            .map(|&b| if b.is_ascii_graphic() { char::from(b) } else { '.' })
+            .map(|&b| {
+                if b.is_ascii_graphic() {
+                    char::from(b)
+                } else {
+                    '.'
+                }
+            })
             .collect();
         return Err(format!(
             "not an image ({} bytes starting {head:?})",
@@ -68,7 +74,9 @@ pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> 
         format,
         image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::WebP
     ) {
-        return Err(format!("{format:?} images are not read (PNG, JPEG, WebP are)"));
+        return Err(format!(
+            "{format:?} images are not read (PNG, JPEG, WebP are)"
+        ));
     }
     let (w, h) = r
         .into_dimensions()
@@ -157,7 +165,10 @@ mod tests {
         let img = decode_elevation(&png(2, 2, &px), e, DecodeLimits::default()).unwrap();
         assert_eq!((img.width, img.height), (2, 2));
         for (got, want) in img.heights_m.iter().zip([0.0, 1234.5, -20.0, 8848.0]) {
-            assert!((f64::from(*got) - want).abs() <= e.step_m(), "{got} vs {want}");
+            assert!(
+                (f64::from(*got) - want).abs() <= e.step_m(),
+                "{got} vs {want}"
+            );
         }
         // A real 1 x 1 PNG whose header is edited to claim 60000 x 60000: the header check
         // refuses it (the CRC no longer matches, so patch it too).
@@ -178,7 +189,11 @@ mod tests {
         for &b in bytes {
             c ^= u32::from(b);
             for _ in 0..8 {
-                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
             }
         }
         !c

@@ -12,6 +12,7 @@ mod cache;
 pub mod decode;
 pub mod fetch;
 mod layer;
+pub mod open;
 mod procedural;
 pub mod pyramid;
 mod raster_terrain;
@@ -22,8 +23,8 @@ mod source;
 pub use cache::LruCache;
 pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
 pub use procedural::ProceduralSource;
-pub use refined::RefinedSource;
 pub use raster_terrain::RasterTerrainSource;
+pub use refined::RefinedSource;
 pub use scheduler::{
     Clock, Outcome, RetryPolicy, Scheduler, SchedulerOptions, SchedulerStats, SystemClock,
 };

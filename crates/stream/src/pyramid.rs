@@ -45,7 +45,8 @@ impl PyramidSpec {
             TilingScheme::Geographic => PI,
             TilingScheme::WebMercator => 2.0 * PI,
         };
-        let per_tile = f64::from(self.tile_size.max(2) - u32::from(self.grid == SampleGrid::Corners));
+        let per_tile =
+            f64::from(self.tile_size.max(2) - u32::from(self.grid == SampleGrid::Corners));
         let level = (span0 / per_tile / spacing_rad).log2().ceil();
         (level.max(0.0) as u8).clamp(self.min_level, self.max_level)
     }
@@ -104,6 +105,9 @@ impl Samples for crate::decode::Rgba {
     }
 }
 
+/// Decoded tiles (or "no tile") with their last-use stamps, and the stamp clock.
+type TileCache<T> = (FxHashMap<TileKey, (Option<Arc<T>>, u64)>, u64);
+
 type Decoder<T> = dyn Fn(&[u8]) -> Result<T, String> + Send + Sync;
 
 /// A pyramid of decoded tiles of type `T`.
@@ -111,7 +115,7 @@ pub struct RasterPyramid<T: Samples> {
     fetch: Arc<dyn Fetch>,
     spec: PyramidSpec,
     decode: Box<Decoder<T>>,
-    cache: Mutex<(FxHashMap<TileKey, (Option<Arc<T>>, u64)>, u64)>,
+    cache: Mutex<TileCache<T>>,
     cache_tiles: usize,
 }
 
@@ -158,15 +162,15 @@ impl<T: Samples> RasterPyramid<T> {
         let tile = match self.fetch.fetch(key, cancel)? {
             None => None,
             Some(f) => Some(Arc::new((self.decode)(&f.bytes).map_err(|m| {
-                FetchError::Permanent(format!("{} tile {key}: {m}", self.fetch.name()))
+                FetchError::Permanent(format!("{}: {m}", self.fetch.locate(key)))
             })?)),
         };
         if let Some(t) = &tile {
             let (w, h) = t.size();
             if w != self.spec.tile_size || h != self.spec.tile_size {
                 return Err(FetchError::Permanent(format!(
-                    "{} tile {key}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
-                    self.fetch.name(),
+                    "{}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
+                    self.fetch.locate(key),
                     self.spec.tile_size
                 )));
             }

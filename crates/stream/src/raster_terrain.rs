@@ -16,6 +16,7 @@
 //! * The one-sample ring round the grid (for normals) is extrapolated linearly from inside:
 //!   neighbours' tiles are not fetched for it.
 
+use std::ops::Add;
 use std::sync::Arc;
 
 use globus_geo::Ellipsoid;
@@ -33,8 +34,14 @@ use crate::{SourceError, TerrainData, TerrainSource, TileSource};
 
 /// Mesh samples are checked against data this many times finer.
 const OVERSAMPLE: u32 = 4;
+/// A layer still has detail for a tile whose mesh spacing (or texel) is this close to the
+/// layer's finest sample spacing (rounding of tile sizes like 255 vs 256 samples).
+const DETAIL_TOLERANCE: f64 = 1.01;
+/// Sample positions are pulled this far (a fraction of the tile) inside the tile, so
+/// points on an edge read the tile being built, not its neighbour.
+const EDGE_NUDGE: f64 = 1e-9;
 
-/// Terrain from elevation pyramids, draped with imagery pyramids.
+/// Terrain from elevation pyramids (none: the bare ellipsoid), draped with imagery pyramids.
 pub struct RasterTerrainSource {
     name: String,
     elevation: Vec<Arc<RasterPyramid<HeightImage>>>,
@@ -62,7 +69,8 @@ fn finest_spacing(p: &RasterPyramid<impl Samples>) -> f64 {
         TilingScheme::Geographic => std::f64::consts::PI,
         TilingScheme::WebMercator => 2.0 * std::f64::consts::PI,
     };
-    span0 / f64::from(s.tile_size.max(2)) / f64::from(1u32 << s.max_level.min(30))
+    let per_tile = s.tile_size.max(2) - u32::from(s.grid == crate::pyramid::SampleGrid::Corners);
+    span0 / f64::from(per_tile) / f64::from(1u32 << s.max_level.min(30))
 }
 
 /// Decoded tiles one load touches, fetched once each.
@@ -99,16 +107,20 @@ impl RasterTerrainSource {
         height_range_m: (f64, f64),
         mesh_options: MeshOptions,
     ) -> Result<Self, String> {
-        if elevation.is_empty() {
-            return Err("no elevation layer given".into());
+        if elevation.is_empty() && imagery.is_empty() {
+            return Err("no elevation or imagery layer given".into());
         }
-        // The deepest engine level whose mesh is still coarser than some layer's data.
-        let finest = elevation
-            .iter()
-            .map(|p| finest_spacing(p))
-            .fold(f64::INFINITY, f64::min);
+        // The deepest engine level whose mesh (or colour image) is still coarser than some
+        // layer's data.
         let mesh0 = std::f64::consts::PI / f64::from(MESH_SEGMENTS);
-        let max_level = ((mesh0 / finest).log2().round().max(0.0) as u8).min(TileKey::MAX_LEVEL);
+        let texel0 = std::f64::consts::PI / f64::from(COLOUR_SIZE);
+        let deepest = |spacing: f64, unit: f64| (unit / spacing).log2().add(0.015).floor().max(0.0);
+        let max_level = elevation
+            .iter()
+            .map(|p| deepest(finest_spacing(p), mesh0))
+            .chain(imagery.iter().map(|p| deepest(finest_spacing(p), texel0)))
+            .fold(0.0, f64::max)
+            .min(f64::from(TileKey::MAX_LEVEL)) as u8;
         let names: Vec<&str> = elevation
             .iter()
             .map(|p| p.name())
@@ -163,19 +175,25 @@ impl RasterTerrainSource {
             if !intersects(rect, &s.bounds) {
                 continue;
             }
-            detailed |= finest_spacing(p) < mesh_spacing * 0.75;
+            detailed |= finest_spacing(p) <= mesh_spacing * DETAIL_TOLERANCE;
             let level = s.level_for_spacing(mesh_spacing / f64::from(OVERSAMPLE));
             layers.push((Touched::new(p), level));
         }
+        let texel = rect.height() / f64::from(COLOUR_SIZE);
+        detailed |= self.imagery.iter().any(|p| {
+            intersects(rect, &p.spec().bounds) && finest_spacing(p) <= texel * DETAIL_TOLERANCE
+        });
         if !detailed && key.level() > 0 {
             return Ok(None);
         }
         let side = (MESH_SEGMENTS * OVERSAMPLE + 1) as usize;
         let n = f64::from(MESH_SEGMENTS * OVERSAMPLE);
         let mut out = Vec::with_capacity(side * side);
+        let mut any_data = false;
         for j in 0..side {
             for i in 0..side {
-                let (lon, lat) = rect.lon_lat_at(i as f64 / n, j as f64 / n);
+                let inward = |f: f64| f.clamp(EDGE_NUDGE, 1.0 - EDGE_NUDGE);
+                let (lon, lat) = rect.lon_lat_at(inward(i as f64 / n), inward(j as f64 / n));
                 let mut h = 0.0;
                 for (touched, level) in layers.iter_mut().rev() {
                     let spec = *touched.pyramid.spec();
@@ -189,6 +207,7 @@ impl RasterTerrainSource {
                         h = bilinear(px, py, t.width, t.height, |x, y| {
                             f64::from(t.heights_m[(y * t.width + x) as usize])
                         });
+                        any_data = true;
                         break;
                     }
                 }
@@ -198,10 +217,20 @@ impl RasterTerrainSource {
                 return Err(FetchError::Cancelled);
             }
         }
+        // Every layer answered "no tile here" (404, or a hole in an archive): no data, so
+        // the ancestor stays (or refinement takes over); the roots always exist.
+        if !any_data && key.level() > 0 {
+            return Ok(None);
+        }
         Ok(Some(out))
     }
 
-    fn colour(&self, rect: &GeoRect, heights: &[f32], cancel: &Cancel) -> Result<ColourImage, FetchError> {
+    fn colour(
+        &self,
+        rect: &GeoRect,
+        heights: &[f32],
+        cancel: &Cancel,
+    ) -> Result<ColourImage, FetchError> {
         let size = COLOUR_SIZE as usize;
         let texel = rect.height() / f64::from(COLOUR_SIZE);
         let mut px = vec![0u8; size * size * 4];
@@ -362,7 +391,11 @@ impl TileSource for RasterTerrainSource {
             return Ok(None);
         }
         let tile = self.build(key, cancel).map_err(|e| self.fail(key, e))?;
-        Ok(tile.map(|t| TerrainData::build(t, &self.ellipsoid, &self.occluder, &self.mesh_options)))
+        Ok(
+            tile.map(|t| {
+                TerrainData::build(t, &self.ellipsoid, &self.occluder, &self.mesh_options)
+            }),
+        )
     }
 
     fn byte_size(&self, tile: &TerrainData) -> usize {

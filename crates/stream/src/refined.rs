@@ -59,7 +59,11 @@ impl RefinedSource {
     }
 
     /// The deepest tile of the inner source at or above `key`, loading bases as needed.
-    fn base_for(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<TerrainTile>>, SourceError> {
+    fn base_for(
+        &self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<Arc<TerrainTile>>, SourceError> {
         let mut level = self.data_level.min(key.level());
         loop {
             let Some(candidate) = key.ancestor_at(level) else {
@@ -70,7 +74,10 @@ impl RefinedSource {
                     return Ok(found);
                 }
             } else {
-                let loaded = self.inner.load(candidate, cancel)?.map(|d| Arc::new(d.tile));
+                let loaded = self
+                    .inner
+                    .load(candidate, cancel)?
+                    .map(|d| Arc::new(d.tile));
                 self.remember(candidate, loaded.clone());
                 if loaded.is_some() {
                     return Ok(loaded);
@@ -201,17 +208,25 @@ mod tests {
         );
         assert_eq!((source.data_level(), source.max_level()), (10, 22));
         let data_key = TileKey::new(10, 703, 522);
-        let direct = inner.load(data_key, &Cancel::new())
-                .expect("load").expect("tile");
-        let through = source.load(data_key, &Cancel::new())
-                .expect("load").expect("tile");
+        let direct = inner
+            .load(data_key, &Cancel::new())
+            .expect("load")
+            .expect("tile");
+        let through = source
+            .load(data_key, &Cancel::new())
+            .expect("load")
+            .expect("tile");
         assert_eq!(direct.tile.heights_m, through.tile.heights_m);
         // A deep tile: refined from the level-10 base, deterministic, with its own mesh.
         let deep = TileKey::new(18, 703 * 256 + 17, 522 * 256 + 200);
-        let a = source.load(deep, &Cancel::new())
-                .expect("load").expect("refined");
-        let b = source.load(deep, &Cancel::new())
-                .expect("load").expect("refined");
+        let a = source
+            .load(deep, &Cancel::new())
+            .expect("load")
+            .expect("refined");
+        let b = source
+            .load(deep, &Cancel::new())
+            .expect("load")
+            .expect("refined");
         assert_eq!(a.tile.heights_m, b.tile.heights_m);
         assert_eq!(a.mesh.indices, b.mesh.indices);
         assert!(a.tile.geometric_error_m < direct.tile.geometric_error_m);
@@ -281,8 +296,10 @@ mod tests {
             .load(hole.parent().expect("parent"), &Cancel::new())
             .expect("load")
             .expect("real data above the hole");
-        let filled = source.load(hole, &Cancel::new())
-                .expect("load").expect("refined");
+        let filled = source
+            .load(hole, &Cancel::new())
+            .expect("load")
+            .expect("refined");
         assert_eq!(filled.tile.key, hole);
         // Refined from the level-9 parent: at the parent's own samples it stays within the
         // parent's error.
@@ -299,8 +316,10 @@ mod tests {
         // Deeper tiles in the hole come from the same level-9 base: the filled tile's children
         // agree with it along its west edge at the shared samples.
         let child = hole.children().expect("children")[0];
-        let c = source.load(child, &Cancel::new())
-                .expect("load").expect("refined child");
+        let c = source
+            .load(child, &Cancel::new())
+            .expect("load")
+            .expect("refined child");
         for j in 0..=16 {
             let (a, b) = (filled.tile.height_at(0, j), c.tile.height_at(0, 2 * j));
             assert!(

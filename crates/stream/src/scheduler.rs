@@ -297,8 +297,9 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
         if q.backoff.len() > 4096 {
             let now = self.shared.clock.now();
             let wanted = &q.wanted;
-            q.backoff
-                .retain(|k, (_, ready)| wanted.contains_key(k) || *ready + Duration::from_secs(600) > now);
+            q.backoff.retain(|k, (_, ready)| {
+                wanted.contains_key(k) || *ready + Duration::from_secs(600) > now
+            });
         }
         q.sort();
         drop(old);
@@ -470,14 +471,13 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
                     Some(Outcome::Failed(e))
                 }
             };
-            let outcome =
-                if cancel.is_cancelled() && matches!(outcome, Some(Outcome::Failed(_))) {
-                    // A failure of a tile nobody wants is not worth reporting.
-                    q.stats.dropped += 1;
-                    None
-                } else {
-                    outcome
-                };
+            let outcome = if cancel.is_cancelled() && matches!(outcome, Some(Outcome::Failed(_))) {
+                // A failure of a tile nobody wants is not worth reporting.
+                q.stats.dropped += 1;
+                None
+            } else {
+                outcome
+            };
             if outcome.is_none() {
                 q.in_flight.remove(&key);
             }
@@ -610,5 +610,244 @@ mod tests {
         let many: Vec<TileRequest> = (0..500).map(|x| req(x % 60, f64::from(x))).collect();
         s.submit(&many);
         drop(s);
+    }
+
+    /// A clock the test moves by hand.
+    #[derive(Default)]
+    struct FakeClock(Mutex<Duration>);
+
+    impl Clock for FakeClock {
+        fn now(&self) -> Duration {
+            *self.0.lock().unwrap()
+        }
+    }
+
+    impl FakeClock {
+        fn advance(&self, d: Duration) {
+            *self.0.lock().unwrap() += d;
+        }
+    }
+
+    /// Fails transiently `fail_times` times per tile (with `retry_after` on tile x == 1),
+    /// recording when (on the fake clock) each attempt started; tile x == 9 blocks until
+    /// cancelled.
+    struct Flaky {
+        clock: Arc<FakeClock>,
+        fail_times: u32,
+        attempts: Mutex<FxHashMap<TileKey, Vec<Duration>>>,
+    }
+
+    impl TileSource for Flaky {
+        type Tile = u32;
+        fn name(&self) -> &str {
+            "flaky"
+        }
+        fn scheme(&self) -> TilingScheme {
+            TilingScheme::Geographic
+        }
+        fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<u32>, SourceError> {
+            let n = {
+                let mut a = self.attempts.lock().unwrap();
+                let v = a.entry(key).or_default();
+                v.push(self.clock.now());
+                v.len() as u32
+            };
+            if key.x() == 9 {
+                while !cancel.is_cancelled() {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                return Err(SourceError::Cancelled { key });
+            }
+            if n <= self.fail_times {
+                return Err(SourceError::Transient {
+                    key,
+                    source_name: "flaky".into(),
+                    message: "HTTP 503".into(),
+                    retry_after: (key.x() == 1).then(|| Duration::from_secs(30)),
+                });
+            }
+            Ok(Some(key.x()))
+        }
+        fn byte_size(&self, _: &u32) -> usize {
+            4
+        }
+    }
+
+    fn flaky(fail_times: u32) -> (Arc<FakeClock>, Arc<Flaky>, Scheduler<Flaky>) {
+        let clock = Arc::new(FakeClock::default());
+        let src = Arc::new(Flaky {
+            clock: Arc::clone(&clock),
+            fail_times,
+            attempts: Mutex::new(FxHashMap::default()),
+        });
+        let options = SchedulerOptions {
+            workers: 2,
+            retry: RetryPolicy::default(),
+        };
+        let s = Scheduler::with_clock(Arc::clone(&src), options, clock.clone());
+        (clock, src, s)
+    }
+
+    /// Waits (real time) until `cond` holds.
+    fn eventually(what: &str, cond: impl Fn() -> bool) {
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while !cond() {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "timed out waiting: {what}"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    #[test]
+    fn backoff_delays_grow_with_jitter_and_honour_retry_after() {
+        let p = RetryPolicy::default();
+        assert_eq!(p.delay(1, None, 0.0), Duration::from_millis(125));
+        assert_eq!(p.delay(1, None, 0.999_999).as_millis(), 249);
+        assert_eq!(p.delay(3, None, 0.0), Duration::from_millis(500));
+        assert_eq!(p.delay(30, None, 0.0), Duration::from_secs(10));
+        assert_eq!(
+            p.delay(1, Some(Duration::from_secs(7)), 0.5),
+            Duration::from_secs(7)
+        );
+        assert_eq!(
+            p.delay(1, Some(Duration::from_secs(99_999)), 0.5),
+            Duration::from_secs(120)
+        );
+    }
+
+    #[test]
+    fn transient_failures_are_retried_after_backoff_on_the_clock() {
+        let (clock, src, s) = flaky(2);
+        s.submit(&[req(0, 1.0)]);
+        let attempts = |x: u32| {
+            src.attempts
+                .lock()
+                .unwrap()
+                .get(&TileKey::new(5, x, 0))
+                .map_or(0, Vec::len)
+        };
+        eventually("first attempt", || attempts(0) == 1);
+        // The clock does not move: no second attempt however long we wait.
+        std::thread::sleep(Duration::from_millis(300));
+        assert_eq!(attempts(0), 1);
+        assert_eq!(s.stats().retries, 1);
+        // After the first backoff (125..250 ms), the second attempt; after the second
+        // (250..500 ms), the third, which succeeds.
+        clock.advance(Duration::from_millis(250));
+        s.poke();
+        eventually("second attempt", || attempts(0) == 2);
+        clock.advance(Duration::from_millis(500));
+        s.poke();
+        let (key, outcome) = s.wait_one(Duration::from_secs(10)).expect("outcome");
+        assert_eq!(key, TileKey::new(5, 0, 0));
+        assert!(matches!(outcome, Outcome::Loaded(ref v) if **v == 0));
+        let times = src.attempts.lock().unwrap()[&key].clone();
+        assert_eq!(
+            times,
+            vec![
+                Duration::ZERO,
+                Duration::from_millis(250),
+                Duration::from_millis(750)
+            ]
+        );
+        let st = s.stats();
+        assert_eq!((st.started, st.retries, st.loaded, st.failed), (3, 2, 1, 0));
+    }
+
+    #[test]
+    fn retry_after_is_honoured_and_attempts_are_bounded() {
+        let (clock, src, s) = flaky(u32::MAX);
+        s.submit(&[req(1, 1.0)]);
+        let key = TileKey::new(5, 1, 0);
+        let attempts = || src.attempts.lock().unwrap().get(&key).map_or(0, Vec::len);
+        eventually("first attempt", || attempts() == 1);
+        // Retry-After: 30 s. At 29 s nothing happens; at 30 s the second attempt.
+        clock.advance(Duration::from_secs(29));
+        s.poke();
+        std::thread::sleep(Duration::from_millis(250));
+        assert_eq!(attempts(), 1);
+        for n in 2..=4 {
+            clock.advance(Duration::from_secs(1));
+            s.poke();
+            eventually("next attempt", || attempts() == n);
+            clock.advance(Duration::from_secs(29));
+        }
+        // Four attempts in all, then a failure naming the tile.
+        let (_, outcome) = s.wait_one(Duration::from_secs(10)).expect("outcome");
+        match outcome {
+            Outcome::Failed(e) => {
+                assert!(e.to_string().contains("5/1/0") && e.to_string().contains("503"))
+            }
+            other => panic!("expected a failure, got {other:?}"),
+        }
+        assert_eq!(s.stats().failed, 1);
+    }
+
+    #[test]
+    fn unwanted_loads_are_cancelled_in_flight_and_retries_stop() {
+        let (clock, src, s) = flaky(1);
+        s.submit(&[req(9, 1.0), req(2, 0.5)]);
+        let started = |x: u32| {
+            src.attempts
+                .lock()
+                .unwrap()
+                .contains_key(&TileKey::new(5, x, 0))
+        };
+        eventually("both started", || started(9) && started(2));
+        // Tile 2 failed once and waits out its backoff; the camera moves on.
+        eventually("retry scheduled", || s.stats().retries == 1);
+        s.submit(&[req(3, 1.0)]);
+        // Tile 3 fails once too; once its backoff has passed it loads.
+        eventually("tile 3 failed once", || s.stats().retries == 2);
+        clock.advance(Duration::from_secs(1));
+        s.poke();
+        let (key, outcome) = s.wait_one(Duration::from_secs(10)).expect("outcome");
+        assert_eq!(key, TileKey::new(5, 3, 0));
+        assert!(matches!(outcome, Outcome::Loaded(_)));
+        // Tile 9 stopped when it was no longer wanted, and nothing of it was delivered.
+        eventually("tile 9 dropped", || s.stats().dropped == 1);
+        let st = s.stats();
+        assert_eq!(st.cancelled_in_flight, 1, "{st:?}");
+        assert!(s.drain().is_empty());
+        // Tile 2's retry never ran.
+        assert_eq!(
+            src.attempts.lock().unwrap()[&TileKey::new(5, 2, 0)].len(),
+            1
+        );
+    }
+
+    #[test]
+    fn ancestors_load_before_descendants_of_equal_priority() {
+        let src = Arc::new(Recorder {
+            order: Mutex::new(Vec::new()),
+            gate: Mutex::new(false),
+            started: AtomicUsize::new(0),
+        });
+        let s = Scheduler::new(Arc::clone(&src), 1);
+        let blocker = TileRequest {
+            key: TileKey::new(2, 0, 0),
+            priority: 100.0,
+        };
+        s.submit(&[blocker]);
+        while src.started.load(Ordering::SeqCst) == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let at = |level: u8| TileRequest {
+            key: TileKey::new(level, 0, 0),
+            priority: 1.0,
+        };
+        s.submit(&[blocker, at(7), at(4), at(6), at(5)]);
+        *src.gate.lock().unwrap() = true;
+        let _ = collect(&s, 5);
+        let levels: Vec<u8> = src
+            .order
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|k| k.level())
+            .collect();
+        assert_eq!(levels, vec![2, 4, 5, 6, 7]);
     }
 }

@@ -70,7 +70,8 @@ pub fn interpolate_in_cell(
 /// the curved body: `d^2 / (8 r)` for the cell diagonal `d` and the largest radius of
 /// curvature `r`. Part of every tile's geometric error.
 pub fn mesh_bulge_m(ellipsoid: &globus_geo::Ellipsoid, rect: &globus_tiling::GeoRect) -> f64 {
-    let r_max = ellipsoid.maximum_radius() * ellipsoid.maximum_radius() / ellipsoid.minimum_radius();
+    let r_max =
+        ellipsoid.maximum_radius() * ellipsoid.maximum_radius() / ellipsoid.minimum_radius();
     let cos_lat = rect.north.abs().min(rect.south.abs()).cos();
     let ns = rect.height() / f64::from(MESH_SEGMENTS) * r_max;
     let ew = rect.width() / f64::from(MESH_SEGMENTS) * r_max * cos_lat;
@@ -84,7 +85,9 @@ pub fn mesh_height_at(heights_m: &[f32], x: f64, y: f64) -> f64 {
     let n = MESH_SEGMENTS as i32;
     let i = (x.floor() as i32).clamp(0, n - 1);
     let j = (y.floor() as i32).clamp(0, n - 1);
-    let h = |a: i32, b: i32| f64::from(heights_m[((b + 1) as usize) * HEIGHT_GRID_SIDE + (a + 1) as usize]);
+    let h = |a: i32, b: i32| {
+        f64::from(heights_m[((b + 1) as usize) * HEIGHT_GRID_SIDE + (a + 1) as usize])
+    };
     interpolate_in_cell(
         i,
         j,

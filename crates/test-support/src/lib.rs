@@ -3,8 +3,10 @@
 //! * [`MemoryOracle`]: a [`globus_tiling::TileOracle`] with controllable load states and a
 //!   simple error model, so selection can be tested deterministically without any data.
 //! * [`image`](mod@image): reading, comparing and inspecting rendered frames.
+//! * [`http::FaultServer`]: a real HTTP server on 127.0.0.1 that injects faults.
 //! * [`shared_data`]: the path of a file in `../shared/data`.
 
+pub mod http;
 pub mod image;
 mod oracle;
 

@@ -248,7 +248,10 @@ impl Header {
     /// Parses a header (the first 127 bytes of `bytes`).
     pub fn parse(bytes: &[u8]) -> Result<Self, String> {
         if bytes.len() < HEADER_LEN {
-            return Err(format!("header needs {HEADER_LEN} bytes, got {}", bytes.len()));
+            return Err(format!(
+                "header needs {HEADER_LEN} bytes, got {}",
+                bytes.len()
+            ));
         }
         if &bytes[..7] != b"PMTiles" {
             return Err("not a PMTiles archive (no magic number)".into());

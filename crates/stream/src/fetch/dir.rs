@@ -54,6 +54,13 @@ impl Fetch for DirectoryFetch {
         &self.name
     }
 
+    fn locate(&self, key: TileKey) -> String {
+        self.root
+            .join(self.template.expand(self.scheme, key))
+            .display()
+            .to_string()
+    }
+
     fn fetch(&self, key: TileKey, _cancel: &Cancel) -> Result<Option<Fetched>, FetchError> {
         let path = self.root.join(self.template.expand(self.scheme, key));
         let real = match path.canonicalize() {
@@ -111,7 +118,11 @@ mod tests {
         let escaped = f.fetch(TileKey::new(4, 0, 0), &c).unwrap_err();
         assert!(escaped.to_string().contains("outside the tile directory"));
 
-        for bad in ["../{z}/{x}/{y}.png", "/etc/{z}/{x}/{y}", "a/../../{z}/{x}/{y}"] {
+        for bad in [
+            "../{z}/{x}/{y}.png",
+            "/etc/{z}/{x}/{y}",
+            "a/../../{z}/{x}/{y}",
+        ] {
             assert!(DirectoryFetch::new(&root, bad, geo).is_err(), "{bad}");
         }
         // TMS rows: geographic level 3 has 8 rows, so row 2 from the north is 5 from the south.

@@ -247,7 +247,10 @@ fn classify(url: &str, e: ureq::Error) -> FetchError {
 }
 
 fn classify_io(url: &str, e: &std::io::Error) -> FetchError {
-    match e.get_ref().and_then(|inner| inner.downcast_ref::<ureq::Error>()) {
+    match e
+        .get_ref()
+        .and_then(|inner| inner.downcast_ref::<ureq::Error>())
+    {
         Some(ureq::Error::BodyExceedsLimit(n)) => {
             FetchError::Permanent(format!("{url}: body over the {n}-byte limit"))
         }
@@ -369,6 +372,10 @@ impl Fetch for TemplateFetch {
         self.template.as_str()
     }
 
+    fn locate(&self, key: TileKey) -> String {
+        self.url(key)
+    }
+
     fn fetch(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Fetched>, FetchError> {
         Ok(self
             .client
@@ -394,25 +401,22 @@ mod tests {
             parse_retry_after("Sun, 06 Nov 1994 08:49:37 GMT", now),
             Some(Duration::from_secs(120))
         );
-        assert_eq!(
-            parse_retry_after(" 7 ", now),
-            Some(Duration::from_secs(7))
-        );
+        assert_eq!(parse_retry_after(" 7 ", now), Some(Duration::from_secs(7)));
         assert_eq!(parse_retry_after("soon", now), None);
         assert_eq!(
             freshness(Some("public, max-age=3600"), None, now),
             Some(Duration::from_secs(3600))
         );
-        assert_eq!(
-            freshness(Some("no-cache"), None, now),
-            Some(Duration::ZERO)
-        );
+        assert_eq!(freshness(Some("no-cache"), None, now), Some(Duration::ZERO));
         assert_eq!(
             freshness(None, Some("Sun, 06 Nov 1994 08:49:37 GMT"), now),
             Some(Duration::from_secs(120))
         );
         assert_eq!(freshness(None, None, now), None);
-        assert_eq!(host_of("https://a.tile.example:8080/1/2/3.png"), "a.tile.example:8080");
+        assert_eq!(
+            host_of("https://a.tile.example:8080/1/2/3.png"),
+            "a.tile.example:8080"
+        );
         assert_eq!(host_of("http://h?x=1"), "h");
     }
 }

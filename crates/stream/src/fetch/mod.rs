@@ -100,6 +100,10 @@ impl Fetched {
 pub trait Fetch: Send + Sync + 'static {
     /// The URL, path or file, for logs and errors.
     fn name(&self) -> &str;
+    /// Where `key` is read from (its URL or file), for errors.
+    fn locate(&self, key: TileKey) -> String {
+        format!("{} tile {key}", self.name())
+    }
     /// The bytes of `key` (a key of the pyramid's own scheme); `Ok(None)` if there is no tile.
     fn fetch(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Fetched>, FetchError>;
 }

@@ -14,7 +14,9 @@ use std::os::unix::fs::FileExt;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
-use globus_tiling::pmtiles::{Entry, HEADER_LEN, Header, compression, decode_directory, find_entry, tile_id};
+use globus_tiling::pmtiles::{
+    Entry, HEADER_LEN, Header, compression, decode_directory, find_entry, tile_id,
+};
 use globus_tiling::{TileKey, TilingScheme};
 use rustc_hash::FxHashMap;
 
@@ -62,12 +64,15 @@ impl RangeRead for FileRange {
     }
 
     fn read_range(&self, offset: u64, len: u64, _cancel: &Cancel) -> Result<Vec<u8>, FetchError> {
-        let end = offset.checked_add(len).filter(|&e| e <= self.len).ok_or_else(|| {
-            FetchError::Permanent(format!(
-                "{}: range {offset}+{len} beyond the file's {} bytes",
-                self.name, self.len
-            ))
-        })?;
+        let end = offset
+            .checked_add(len)
+            .filter(|&e| e <= self.len)
+            .ok_or_else(|| {
+                FetchError::Permanent(format!(
+                    "{}: range {offset}+{len} beyond the file's {} bytes",
+                    self.name, self.len
+                ))
+            })?;
         let mut buf = vec![0u8; (end - offset) as usize];
         self.file
             .read_exact_at(&mut buf, offset)
@@ -162,7 +167,9 @@ impl<R: RangeRead> PmTilesFetch<R> {
         let cancel = Cancel::new();
         let name = reader.name().to_string();
         let e = |e: FetchError| format!("{name}: {e}");
-        let head = reader.read_range(0, HEADER_LEN as u64, &cancel).map_err(e)?;
+        let head = reader
+            .read_range(0, HEADER_LEN as u64, &cancel)
+            .map_err(e)?;
         let header = Header::parse(&head).map_err(|m| format!("{name}: {m}"))?;
         let part = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, String> {
             if len > MAX_PART_BYTES {
@@ -223,7 +230,12 @@ impl<R: RangeRead> PmTilesFetch<R> {
         )
     }
 
-    fn leaf(&self, offset: u64, length: u32, cancel: &Cancel) -> Result<Arc<Vec<Entry>>, FetchError> {
+    fn leaf(
+        &self,
+        offset: u64,
+        length: u32,
+        cancel: &Cancel,
+    ) -> Result<Arc<Vec<Entry>>, FetchError> {
         if let Some(d) = self.lock_leaves().get(&offset) {
             return Ok(Arc::clone(d));
         }
@@ -234,8 +246,15 @@ impl<R: RangeRead> PmTilesFetch<R> {
                 "{name}: leaf directory at {offset} lies outside the leaf section"
             )));
         }
-        let raw = self.reader.read_range(base + offset, u64::from(length), cancel)?;
-        let bytes = inflate(name, "leaf directory", &raw, self.header.internal_compression)?;
+        let raw = self
+            .reader
+            .read_range(base + offset, u64::from(length), cancel)?;
+        let bytes = inflate(
+            name,
+            "leaf directory",
+            &raw,
+            self.header.internal_compression,
+        )?;
         let dir = Arc::new(
             decode_directory(&bytes)
                 .map_err(|m| FetchError::Permanent(format!("{name}: leaf directory: {m}")))?,
@@ -286,9 +305,9 @@ impl<R: RangeRead> Fetch for PmTilesFetch<R> {
                 e.length, e.offset
             )));
         }
-        let raw = self
-            .reader
-            .read_range(self.header.data.0 + e.offset, u64::from(e.length), cancel)?;
+        let raw =
+            self.reader
+                .read_range(self.header.data.0 + e.offset, u64::from(e.length), cancel)?;
         let bytes = inflate(name, "tile", &raw, self.header.tile_compression)?;
         Ok((!bytes.is_empty()).then(|| Fetched::local(bytes)))
     }

@@ -70,7 +70,8 @@ impl UrlTemplate {
         }
         let has = |p: &Part| parts.contains(p);
         let has_row = has(&Part::Y) || has(&Part::ReverseY);
-        if !has(&Part::Quadkey) && !(has(&Part::Z) && has(&Part::X) && has_row) {
+        let names_tile = has(&Part::Quadkey) || (has(&Part::Z) && has(&Part::X) && has_row);
+        if !names_tile {
             return Err(format!(
                 "template {template:?} names no tile: it needs {{z}}, {{x}} and {{y}} (or {{-y}}), or {{q}}"
             ));
@@ -151,8 +152,8 @@ mod tests {
         let rev = UrlTemplate::parse("/t/{z}/{x}/{reverseY}.png", &[]).unwrap();
         assert_eq!(rev.expand(merc, k), "/t/12/2145/2661.png");
         // Bing Maps Tile System: level 3, x 3, y 5 is quadkey "213".
-        let bing = UrlTemplate::parse("http://ecn.{s}.example/a{q}.jpeg?g=1", &["t0", "t1"])
-            .unwrap();
+        let bing =
+            UrlTemplate::parse("http://ecn.{s}.example/a{q}.jpeg?g=1", &["t0", "t1"]).unwrap();
         assert_eq!(
             bing.expand(merc, TileKey::new(3, 3, 5)),
             "http://ecn.t0.example/a213.jpeg?g=1"

@@ -47,7 +47,9 @@ impl WmsFetch {
         tile_size: u32,
     ) -> Result<Self, String> {
         if !(base.starts_with("http://") || base.starts_with("https://")) {
-            return Err(format!("WMS URL {base:?} must start with http:// or https://"));
+            return Err(format!(
+                "WMS URL {base:?} must start with http:// or https://"
+            ));
         }
         if layers.is_empty() {
             return Err(format!("WMS {base}: no layers named"));
@@ -81,7 +83,8 @@ impl WmsFetch {
             }
             TilingScheme::WebMercator => {
                 let x = |lon: f64| lon.to_radians() / std::f64::consts::PI * MERCATOR_HALF_M;
-                let y = |lat: f64| (1.0 - 2.0 * lat_to_mercator_y(lat.to_radians())) * MERCATOR_HALF_M;
+                let y =
+                    |lat: f64| (1.0 - 2.0 * lat_to_mercator_y(lat.to_radians())) * MERCATOR_HALF_M;
                 ("EPSG:3857", [x(w), y(s), x(e), y(n)])
             }
         };
@@ -131,6 +134,10 @@ impl Fetch for WmsFetch {
         &self.base
     }
 
+    fn locate(&self, key: TileKey) -> String {
+        self.url(key)
+    }
+
     fn fetch(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Fetched>, FetchError> {
         let url = self.url(key);
         let Some(body) = self.client.get(&url, None, cancel)? else {
@@ -169,7 +176,13 @@ mod tests {
     }
 
     fn bbox(url: &str) -> Vec<f64> {
-        let b = url.split("BBOX=").nth(1).unwrap().split('&').next().unwrap();
+        let b = url
+            .split("BBOX=")
+            .nth(1)
+            .unwrap()
+            .split('&')
+            .next()
+            .unwrap();
         b.split(',').map(|v| v.parse().unwrap()).collect()
     }
 

@@ -1,0 +1,439 @@
+//! Opening a pyramid from what a user writes: a directory, an `.mbtiles` or `.pmtiles` file,
+//! an HTTP URL template, a served `globus tile` directory, a PMTiles URL, or a WMS.
+//!
+//! A [`SourceSpec`] is a location plus optional settings, written either as a TOML table
+//! (`[[terrain]] url = "..." encoding = "terrarium"`) or on the command line as the location
+//! followed by `#key=value&key=value` (the fragment is never sent to a server):
+//!
+//! ```text
+//! ./out/topo                                     (a globus tile directory: metadata.json)
+//! ./srtm.pmtiles   ./world.mbtiles
+//! http://127.0.0.1:8000/topo                     (a served directory: fetches metadata.json)
+//! https://tiles.example/terrarium/{z}/{x}/{y}.png#encoding=terrarium&maxzoom=15
+//! https://{s}.tiles.example/{z}/{x}/{y}.jpg#subdomains=a,b,c&maxzoom=19
+//! https://maps.example/wms#wms_layers=relief&wms_version=1.3.0&scheme=geographic
+//! ```
+//!
+//! What the container's metadata says (scheme, levels, tile size, sample grid, encoding,
+//! bounds) is used unless the spec overrides it; bare templates default to Web Mercator,
+//! 256-pixel cell-registered tiles.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use globus_terrain::encoding::ElevationEncoding;
+use globus_tiling::{GeoRect, TilingScheme};
+use serde::Deserialize;
+
+use crate::decode::{DecodeLimits, HeightImage, Rgba, decode_elevation, decode_image};
+use crate::fetch::pmtiles::{FileRange, HttpRange};
+use crate::fetch::{
+    Cancel, DirectoryFetch, Fetch, HttpClient, MbTilesFetch, PmTilesFetch, TemplateFetch, WmsFetch,
+    WmsVersion,
+};
+use crate::pyramid::{PyramidSpec, RasterPyramid, SampleGrid};
+
+/// Where a layer comes from, and what it is where the container does not say.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceSpec {
+    /// A path, or an `http(s)://` URL (a template, a served directory, a `.pmtiles` file or a
+    /// WMS endpoint).
+    pub url: String,
+    /// Elevation encoding: `terrarium`, `mapbox` or `centimetre`.
+    pub encoding: Option<String>,
+    /// `geographic` or `webmercator`.
+    pub scheme: Option<String>,
+    /// Shallowest level with tiles.
+    pub minzoom: Option<u8>,
+    /// Deepest level with tiles.
+    pub maxzoom: Option<u8>,
+    /// Samples per tile side.
+    pub tile_size: Option<u32>,
+    /// `corners` or `cells`.
+    pub grid: Option<String>,
+    /// West, south, east, north in degrees: where the layer has data.
+    pub bounds: Option<[f64; 4]>,
+    /// Subdomains for `{s}`.
+    pub subdomains: Option<Vec<String>>,
+    /// WMS layers (makes the URL a WMS endpoint).
+    pub wms_layers: Option<String>,
+    /// WMS version, `1.1.1` or `1.3.0` (default).
+    pub wms_version: Option<String>,
+    /// WMS image format (default `image/png`).
+    pub format: Option<String>,
+}
+
+impl SourceSpec {
+    /// Parses `LOCATION[#key=value&...]`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let (url, opts) = text.split_once('#').unwrap_or((text, ""));
+        let mut s = SourceSpec {
+            url: url.to_string(),
+            ..Self::default()
+        };
+        for kv in opts.split('&').filter(|kv| !kv.is_empty()) {
+            let (k, v) = kv
+                .split_once('=')
+                .ok_or_else(|| format!("source {text:?}: option {kv:?} is not key=value"))?;
+            let num = |v: &str| {
+                v.parse::<u32>()
+                    .map_err(|_| format!("source {text:?}: {k}={v} is not a number"))
+            };
+            let level = |v: &str| -> Result<u8, String> {
+                num(v).and_then(|n| {
+                    u8::try_from(n)
+                        .ok()
+                        .filter(|&l| l <= 29)
+                        .ok_or_else(|| format!("source {text:?}: {k}={v} is not a level (0-29)"))
+                })
+            };
+            match k {
+                "encoding" => s.encoding = Some(v.into()),
+                "scheme" => s.scheme = Some(v.into()),
+                "minzoom" => s.minzoom = Some(level(v)?),
+                "maxzoom" => s.maxzoom = Some(level(v)?),
+                "tile_size" => s.tile_size = Some(num(v)?),
+                "grid" => s.grid = Some(v.into()),
+                "bounds" => {
+                    let b: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+                    let [w, so, e, n] = b[..] else {
+                        return Err(format!(
+                            "source {text:?}: bounds={v} is not W,S,E,N degrees"
+                        ));
+                    };
+                    s.bounds = Some([w, so, e, n]);
+                }
+                "subdomains" => s.subdomains = Some(v.split(',').map(str::to_string).collect()),
+                "wms_layers" => s.wms_layers = Some(v.into()),
+                "wms_version" => s.wms_version = Some(v.into()),
+                "format" => s.format = Some(v.replace("%2F", "/")),
+                other => {
+                    return Err(format!(
+                        "source {text:?}: unknown option {other:?} (known: encoding scheme minzoom maxzoom tile_size grid bounds subdomains wms_layers wms_version format)"
+                    ));
+                }
+            }
+        }
+        Ok(s)
+    }
+}
+
+/// What a layer is used for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerKind {
+    /// Heights.
+    Elevation,
+    /// Colour.
+    Imagery,
+}
+
+/// What the container's own metadata says.
+#[derive(Default)]
+struct Meta {
+    scheme: Option<TilingScheme>,
+    min: Option<u8>,
+    max: Option<u8>,
+    tile_size: Option<u32>,
+    grid: Option<SampleGrid>,
+    encoding: Option<String>,
+    bounds: Option<[f64; 4]>,
+    format: Option<String>,
+    tms: bool,
+}
+
+fn meta_from_json(j: &serde_json::Value) -> Meta {
+    let level = |k: &str| {
+        j[k].as_u64()
+            .or_else(|| j[k].as_str().and_then(|s| s.parse().ok()))
+            .and_then(|v| u8::try_from(v).ok())
+    };
+    let bounds = match &j["bounds"] {
+        serde_json::Value::Array(a) => {
+            let v: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
+            <[f64; 4]>::try_from(v).ok()
+        }
+        serde_json::Value::String(s) => {
+            let v: Vec<f64> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+            <[f64; 4]>::try_from(v).ok()
+        }
+        _ => None,
+    };
+    Meta {
+        scheme: j["scheme"].as_str().and_then(|s| s.parse().ok()),
+        min: level("minzoom"),
+        max: level("maxzoom"),
+        tile_size: j["tile_size"]
+            .as_u64()
+            .or_else(|| j["tile_size"].as_str().and_then(|s| s.parse().ok()))
+            .and_then(|v| u32::try_from(v).ok()),
+        grid: match j["sample_grid"].as_str() {
+            Some("corners") => Some(SampleGrid::Corners),
+            Some("cells") => Some(SampleGrid::Cells),
+            _ => None,
+        },
+        encoding: j["encoding"].as_str().map(str::to_string),
+        bounds,
+        format: j["format"].as_str().map(str::to_string),
+        tms: j["layout"].as_str() == Some("tms"),
+    }
+}
+
+/// An opened layer: where its bytes come from and how they are laid out.
+pub struct OpenedLayer {
+    /// The bytes.
+    pub fetch: Arc<dyn Fetch>,
+    /// The layout.
+    pub spec: PyramidSpec,
+    /// The elevation encoding (elevation layers).
+    pub encoding: Option<ElevationEncoding>,
+}
+
+/// Opens the layer `spec` names (reading local metadata, or fetching a served directory's
+/// `metadata.json` or a PMTiles header through `client`).
+pub fn open_layer(
+    spec: &SourceSpec,
+    kind: LayerKind,
+    client: &Arc<HttpClient>,
+) -> Result<OpenedLayer, String> {
+    let url = spec.url.as_str();
+    let is_http = url.starts_with("http://") || url.starts_with("https://");
+    let (fetch, meta): (Arc<dyn Fetch>, Meta) = if let Some(layers) = &spec.wms_layers {
+        let version = match spec.wms_version.as_deref().unwrap_or("1.3.0") {
+            "1.1.1" => WmsVersion::V1_1_1,
+            "1.3.0" => WmsVersion::V1_3_0,
+            v => return Err(format!("WMS {url}: version {v} (use 1.1.1 or 1.3.0)")),
+        };
+        let scheme = parse_scheme(spec.scheme.as_deref(), TilingScheme::Geographic)?;
+        let size = spec.tile_size.unwrap_or(256);
+        let w = WmsFetch::new(
+            Arc::clone(client),
+            url,
+            layers,
+            version,
+            scheme,
+            spec.format.as_deref().unwrap_or("image/png"),
+            size,
+        )?;
+        (Arc::new(w), Meta::default())
+    } else if url.ends_with(".pmtiles") {
+        let (fetch, json): (Arc<dyn Fetch>, serde_json::Value) = if is_http {
+            let p = PmTilesFetch::open(HttpRange::new(Arc::clone(client), url))?;
+            let j = pm_meta(&p);
+            (Arc::new(p), j)
+        } else {
+            let p = PmTilesFetch::open(FileRange::open(Path::new(url))?)?;
+            let j = pm_meta(&p);
+            (Arc::new(p), j)
+        };
+        (fetch, meta_from_json(&json))
+    } else if url.ends_with(".mbtiles") {
+        if is_http {
+            return Err(format!(
+                "{url}: MBTiles cannot be read over HTTP (use PMTiles)"
+            ));
+        }
+        let m = MbTilesFetch::open(Path::new(url))?;
+        let j = serde_json::Value::Object(
+            m.metadata()
+                .iter()
+                .map(|(k, v)| (k.clone(), serde_json::Value::from(v.as_str())))
+                .collect(),
+        );
+        let mut meta = meta_from_json(&j);
+        meta.scheme = Some(m.scheme());
+        (Arc::new(m), meta)
+    } else if is_http && url.contains('{') {
+        let subs: Vec<&str> = spec
+            .subdomains
+            .iter()
+            .flatten()
+            .map(String::as_str)
+            .collect();
+        let scheme = parse_scheme(spec.scheme.as_deref(), TilingScheme::WebMercator)?;
+        (
+            Arc::new(TemplateFetch::new(Arc::clone(client), url, &subs, scheme)?),
+            Meta {
+                scheme: Some(scheme),
+                ..Meta::default()
+            },
+        )
+    } else if is_http {
+        // A served `globus tile` directory.
+        let base = url.trim_end_matches('/');
+        let meta_url = format!("{base}/metadata.json");
+        let body = client
+            .get(&meta_url, None, &Cancel::new())
+            .map_err(|e| format!("{meta_url}: {e}"))?
+            .ok_or_else(|| format!("{meta_url}: not found (a served directory needs its metadata.json, or give a {{z}}/{{x}}/{{y}} template)"))?;
+        let json: serde_json::Value =
+            serde_json::from_slice(&body.fetched.bytes).map_err(|e| format!("{meta_url}: {e}"))?;
+        let meta = meta_from_json(&json);
+        let ext = meta.format.clone().unwrap_or_else(|| "png".into());
+        let row = if meta.tms { "{-y}" } else { "{y}" };
+        let template = format!("{base}/{{z}}/{{x}}/{row}.{ext}");
+        let scheme = parse_scheme(
+            spec.scheme.as_deref(),
+            meta.scheme.unwrap_or(TilingScheme::WebMercator),
+        )?;
+        (
+            Arc::new(TemplateFetch::new(
+                Arc::clone(client),
+                &template,
+                &[],
+                scheme,
+            )?),
+            meta,
+        )
+    } else {
+        let root = Path::new(url);
+        let meta_path = root.join("metadata.json");
+        let text = std::fs::read_to_string(&meta_path).map_err(|e| {
+            format!(
+                "{}: {e} (a tile directory needs the metadata.json `globus tile` writes)",
+                meta_path.display()
+            )
+        })?;
+        let json: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", meta_path.display()))?;
+        let meta = meta_from_json(&json);
+        let ext = meta.format.clone().unwrap_or_else(|| "png".into());
+        let row = if meta.tms { "{-y}" } else { "{y}" };
+        let scheme = meta.scheme.unwrap_or(TilingScheme::WebMercator);
+        (
+            Arc::new(DirectoryFetch::new(
+                root,
+                &format!("{{z}}/{{x}}/{row}.{ext}"),
+                scheme,
+            )?),
+            meta,
+        )
+    };
+
+    let scheme = parse_scheme(
+        spec.scheme.as_deref(),
+        meta.scheme.unwrap_or(TilingScheme::WebMercator),
+    )?;
+    let min_level = spec.minzoom.or(meta.min).unwrap_or(0);
+    let default_max = match kind {
+        LayerKind::Elevation => 15,
+        LayerKind::Imagery => 19,
+    };
+    let max_level = spec.maxzoom.or(meta.max).unwrap_or(default_max);
+    if min_level > max_level {
+        return Err(format!(
+            "{url}: minzoom {min_level} is above maxzoom {max_level}"
+        ));
+    }
+    let tile_size = spec.tile_size.or(meta.tile_size).unwrap_or(256);
+    if !(2..=4096).contains(&tile_size) {
+        return Err(format!("{url}: tile size {tile_size}"));
+    }
+    let grid = match spec.grid.as_deref() {
+        Some("corners") => SampleGrid::Corners,
+        Some("cells") => SampleGrid::Cells,
+        Some(g) => return Err(format!("{url}: grid {g:?} (use corners or cells)")),
+        None => meta.grid.unwrap_or(SampleGrid::Cells),
+    };
+    let bounds = spec
+        .bounds
+        .or(meta.bounds)
+        .map_or(GeoRect::WORLD, |[w, s, e, n]| {
+            GeoRect::from_degrees(w, s, e, n)
+        });
+    let encoding = match kind {
+        LayerKind::Imagery => None,
+        LayerKind::Elevation => {
+            let name = spec.encoding.clone().or(meta.encoding).ok_or_else(|| {
+                format!("{url}: which elevation encoding? add #encoding=terrarium (or mapbox, centimetre)")
+            })?;
+            Some(ElevationEncoding::parse(&name).ok_or_else(|| {
+                format!(
+                    "{url}: unknown elevation encoding {name:?} (terrarium, mapbox, centimetre)"
+                )
+            })?)
+        }
+    };
+    Ok(OpenedLayer {
+        fetch,
+        spec: PyramidSpec {
+            scheme,
+            min_level,
+            max_level,
+            tile_size,
+            grid,
+            bounds,
+        },
+        encoding,
+    })
+}
+
+fn pm_meta<R: crate::fetch::RangeRead>(p: &PmTilesFetch<R>) -> serde_json::Value {
+    let mut j = p.metadata().clone();
+    if !j.is_object() {
+        j = serde_json::json!({});
+    }
+    let (min, max) = p.levels();
+    j["minzoom"] = min.into();
+    j["maxzoom"] = max.into();
+    j["scheme"] = p.scheme().name().into();
+    j
+}
+
+fn parse_scheme(text: Option<&str>, default: TilingScheme) -> Result<TilingScheme, String> {
+    text.map_or(Ok(default), |t| {
+        t.parse()
+            .map_err(|e: globus_tiling::ParseTileNameError| e.0)
+    })
+}
+
+/// Cached decoded tiles per layer.
+const LAYER_CACHE_TILES: usize = 64;
+
+/// An elevation pyramid ready for [`crate::RasterTerrainSource`].
+pub fn elevation_pyramid(
+    layer: OpenedLayer,
+    limits: DecodeLimits,
+) -> Result<Arc<RasterPyramid<HeightImage>>, String> {
+    let encoding = layer
+        .encoding
+        .ok_or_else(|| format!("{}: not an elevation layer", layer.fetch.name()))?;
+    Ok(Arc::new(RasterPyramid::new(
+        layer.fetch,
+        layer.spec,
+        Box::new(move |b| decode_elevation(b, encoding, limits)),
+        LAYER_CACHE_TILES,
+    )))
+}
+
+/// An imagery pyramid ready for [`crate::RasterTerrainSource`].
+pub fn imagery_pyramid(layer: OpenedLayer, limits: DecodeLimits) -> Arc<RasterPyramid<Rgba>> {
+    Arc::new(RasterPyramid::new(
+        layer.fetch,
+        layer.spec,
+        Box::new(move |b| decode_image(b, limits)),
+        LAYER_CACHE_TILES,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_fragments_and_refuses_nonsense() {
+        let s = SourceSpec::parse(
+            "https://t.example/{z}/{x}/{y}.png#encoding=terrarium&maxzoom=15&bounds=5,45,11,48",
+        )
+        .unwrap();
+        assert_eq!(s.url, "https://t.example/{z}/{x}/{y}.png");
+        assert_eq!(s.encoding.as_deref(), Some("terrarium"));
+        assert_eq!(s.maxzoom, Some(15));
+        assert_eq!(s.bounds, Some([5.0, 45.0, 11.0, 48.0]));
+        for bad in ["x#maxzoom=99", "x#colour=red", "x#bounds=1,2", "x#minzoom"] {
+            assert!(SourceSpec::parse(bad).is_err(), "{bad}");
+        }
+        let t: SourceSpec = toml::from_str("url = \"a.pmtiles\"\nmaxzoom = 3\n").unwrap();
+        assert_eq!(t.maxzoom, Some(3));
+    }
+}

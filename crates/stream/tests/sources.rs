@@ -1,0 +1,414 @@
+//! Tile sources against real files and a real HTTP server on 127.0.0.1: the same pyramid
+//! (the SRTM tile N57E011 through `globus tile`) read from a directory, MBTiles, PMTiles on
+//! disk and PMTiles over HTTP range requests; a served directory with every fault injected.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use globus_geo::Ellipsoid;
+use globus_stream::decode::DecodeLimits;
+use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
+use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, open_layer};
+use globus_stream::pyramid::SampleGrid;
+use globus_stream::{
+    Outcome, RasterTerrainSource, RetryPolicy, Scheduler, SchedulerOptions, SystemClock,
+    TerrainSource, TileSource,
+};
+use globus_terrain::MeshOptions;
+use globus_test_support::http::{Fault, FaultServer};
+use globus_test_support::shared_data;
+use globus_tiler::{ElevationEncoding, JobKind, TileJob, TileLayout};
+use globus_tiling::{TileKey, TileRequest, TilingScheme};
+
+const MAX_LEVEL: u8 = 7;
+
+/// Tiles N57E011.hgt (geographic, Terrarium, levels 0-7) into `out` (a directory or an
+/// archive) once per test process.
+fn tile_srtm(out: &Path) {
+    let job = TileJob {
+        kind: JobKind::Dem {
+            encoding: ElevationEncoding::Terrarium,
+            height_scale: None,
+        },
+        inputs: vec![shared_data("N57E011.hgt")],
+        output: out.to_path_buf(),
+        scheme: TilingScheme::Geographic,
+        tile_size: 256,
+        min_level: 0,
+        max_level: Some(MAX_LEVEL),
+        bounds: None,
+        threads: Some(2),
+        resume: false,
+        force: true,
+        layout: TileLayout::Xyz,
+        shard: None,
+    };
+    globus_tiler::run(&job).unwrap_or_else(|e| panic!("tiling into {}: {e}", out.display()));
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("globus-sources-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("scratch dir");
+    d
+}
+
+/// Every tile key present in a `{z}/{x}/{y}.png` directory.
+fn keys_in(dir: &Path) -> Vec<TileKey> {
+    let mut keys = Vec::new();
+    for z in 0..=MAX_LEVEL {
+        let Ok(xs) = std::fs::read_dir(dir.join(z.to_string())) else {
+            continue;
+        };
+        for x in xs.flatten() {
+            let xn: u32 = x.file_name().to_string_lossy().parse().expect("x");
+            for y in std::fs::read_dir(x.path()).expect("ys").flatten() {
+                let name = y.file_name().to_string_lossy().to_string();
+                let yn: u32 = name.trim_end_matches(".png").parse().expect("y");
+                keys.push(TileKey::new(z, xn, yn));
+            }
+        }
+    }
+    keys.sort();
+    keys
+}
+
+fn client(options: HttpOptions) -> Arc<HttpClient> {
+    Arc::new(HttpClient::new(options))
+}
+
+#[test]
+fn directory_mbtiles_pmtiles_and_pmtiles_over_http_serve_the_same_tiles() {
+    let base = scratch("containers");
+    let dir = base.join("dem");
+    tile_srtm(&dir);
+    tile_srtm(&base.join("dem.mbtiles"));
+    tile_srtm(&base.join("dem.pmtiles"));
+    let server = FaultServer::serve_dir(&base);
+    let http = client(HttpOptions::default());
+
+    let specs = [
+        dir.display().to_string(),
+        base.join("dem.mbtiles").display().to_string(),
+        base.join("dem.pmtiles").display().to_string(),
+        server.url("/dem.pmtiles"),
+        server.url("/dem"),
+    ];
+    let layers: Vec<_> = specs
+        .iter()
+        .map(|s| {
+            let spec = SourceSpec::parse(s).expect("spec");
+            open_layer(&spec, LayerKind::Elevation, &http).unwrap_or_else(|e| panic!("{s}: {e}"))
+        })
+        .collect();
+    for (s, l) in specs.iter().zip(&layers) {
+        assert_eq!(l.spec.scheme, TilingScheme::Geographic, "{s}");
+        assert_eq!((l.spec.min_level, l.spec.max_level), (0, MAX_LEVEL), "{s}");
+        assert_eq!(l.spec.grid, SampleGrid::Corners, "{s}");
+        assert_eq!(l.spec.tile_size, 256, "{s}");
+        assert_eq!(l.encoding, Some(ElevationEncoding::Terrarium), "{s}");
+        let b = l.spec.bounds.to_degrees();
+        assert!(
+            (b[0] - 11.0).abs() < 0.01 && (b[3] - 58.0).abs() < 0.01,
+            "{s}: {b:?}"
+        );
+    }
+
+    let keys = keys_in(&dir);
+    assert!(keys.len() >= 10, "{keys:?}");
+    let cancel = Cancel::new();
+    let ranges_before = server.count("/dem.pmtiles");
+    for &k in &keys {
+        let want = std::fs::read(dir.join(format!("{}/{}/{}.png", k.level(), k.x(), k.y())))
+            .expect("tile file");
+        for (s, l) in specs.iter().zip(&layers) {
+            let got = l
+                .fetch
+                .fetch(k, &cancel)
+                .unwrap_or_else(|e| panic!("{s} {k}: {e}"));
+            assert_eq!(got.map(|f| f.bytes), Some(want.clone()), "{s} tile {k}");
+        }
+    }
+    // A tile that was never written: no data, from every container.
+    let empty = TileKey::new(5, 0, 0);
+    for (s, l) in specs.iter().zip(&layers) {
+        assert_eq!(l.fetch.fetch(empty, &cancel), Ok(None), "{s}");
+    }
+    // PMTiles over HTTP: one range request per tile (the root directory was read on
+    // opening), each with a Range header.
+    let pm: Vec<_> = server
+        .requests()
+        .into_iter()
+        .filter(|r| r.target == "/dem.pmtiles")
+        .collect();
+    assert!(pm.iter().all(|r| {
+        r.headers
+            .get("range")
+            .is_some_and(|v| v.starts_with("bytes="))
+    }));
+    assert_eq!(server.count("/dem.pmtiles") - ranges_before, keys.len());
+    // Every request named Globus.
+    assert!(server.requests().iter().all(|r| {
+        r.headers
+            .get("user-agent")
+            .is_some_and(|u| u.starts_with("Globus/"))
+    }));
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+fn describe(o: &Outcome<globus_stream::TerrainData>) -> String {
+    match o {
+        Outcome::Loaded(d) => format!(
+            "loaded, heights {:.0}..{:.0} m",
+            d.tile.min_height_m, d.tile.max_height_m
+        ),
+        Outcome::NoData => "no data".into(),
+        Outcome::Failed(e) => format!("failed: {e}"),
+    }
+}
+
+/// Loads `keys` through a scheduler until each has an outcome (or a deadline passes).
+fn load_all(
+    source: Arc<RasterTerrainSource>,
+    keys: &[TileKey],
+    retry: RetryPolicy,
+) -> Vec<(TileKey, Outcome<globus_stream::TerrainData>)> {
+    let s = Scheduler::with_clock(
+        source,
+        SchedulerOptions { workers: 4, retry },
+        Arc::new(SystemClock::default()),
+    );
+    let requests: Vec<TileRequest> = keys
+        .iter()
+        .map(|&key| TileRequest { key, priority: 1.0 })
+        .collect();
+    let mut out = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while out.len() < keys.len() && Instant::now() < deadline {
+        // The engine resubmits what it still wants every frame.
+        let done: Vec<TileKey> = out.iter().map(|(k, _)| *k).collect();
+        let wanted: Vec<TileRequest> = requests
+            .iter()
+            .filter(|r| !done.contains(&r.key))
+            .copied()
+            .collect();
+        s.submit(&wanted);
+        out.extend(s.wait_one(Duration::from_millis(50)));
+    }
+    out
+}
+
+#[test]
+fn every_fault_ends_as_a_counted_tile_failure_and_the_rest_completes() {
+    let base = scratch("faults");
+    tile_srtm(&base.join("dem"));
+    let dir = base.join("dem");
+    let server = FaultServer::serve_dir(&base);
+    server.set_latency(Duration::from_millis(5));
+    let http = client(HttpOptions {
+        read_timeout: Duration::from_millis(400),
+        response_timeout: Duration::from_secs(2),
+        total_timeout: Duration::from_secs(5),
+        ..HttpOptions::default()
+    });
+    let layer = open_layer(
+        &SourceSpec::parse(&server.url("/dem")).expect("spec"),
+        LayerKind::Elevation,
+        &http,
+    )
+    .expect("served directory");
+    let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
+    let source = Arc::new(
+        RasterTerrainSource::new(
+            vec![pyramid],
+            Vec::new(),
+            Ellipsoid::WGS84,
+            (-100.0, 500.0),
+            MeshOptions::default(),
+        )
+        .expect("source"),
+    );
+
+    let keys = keys_in(&dir);
+    let url = |k: TileKey| format!("/dem/{}/{}/{}.png", k.level(), k.x(), k.y());
+    // One fault per tile, on the deeper tiles; the rest load normally.
+    let faults = [
+        (Fault::Status(500), Some(1), "recovers"),
+        (
+            Fault::RetryAfter {
+                status: 429,
+                secs: 1,
+            },
+            Some(1),
+            "recovers",
+        ),
+        (Fault::Reset, Some(2), "recovers"),
+        (Fault::Status(404), None, "no data"),
+        (Fault::Status(503), None, "fails"),
+        (Fault::Truncate, None, "fails"),
+        (Fault::NotAnImage, None, "fails"),
+        (Fault::AbsurdImage, None, "fails"),
+        (Fault::Stall(Duration::from_secs(3)), None, "fails"),
+    ];
+    let faulty: Vec<TileKey> = keys.iter().rev().take(faults.len()).copied().collect();
+    for (k, (fault, times, _)) in faulty.iter().zip(&faults) {
+        server.add_fault(&url(*k), fault.clone(), *times);
+    }
+    let retry = RetryPolicy {
+        max_attempts: 3,
+        base_delay: Duration::from_millis(20),
+        ..RetryPolicy::default()
+    };
+    let started = Instant::now();
+    let out = load_all(Arc::clone(&source), &keys, retry);
+    assert_eq!(out.len(), keys.len(), "every tile ends somehow");
+    let outcome = |k: TileKey| &out.iter().find(|(key, _)| *key == k).expect("outcome").1;
+    for (k, (fault, _, expect)) in faulty.iter().zip(&faults) {
+        let o = outcome(*k);
+        let ok = match *expect {
+            "recovers" => matches!(o, Outcome::Loaded(_)),
+            "no data" => matches!(o, Outcome::NoData),
+            _ => matches!(o, Outcome::Failed(e) if e.to_string().contains(&format!("{k}"))),
+        };
+        assert!(ok, "{fault:?} on {k}: {}", describe(o));
+    }
+    // Every other tile loaded.
+    for k in keys.iter().filter(|k| !faulty.contains(k)) {
+        assert!(
+            matches!(outcome(*k), Outcome::Loaded(_)),
+            "{k}: {}",
+            describe(outcome(*k))
+        );
+    }
+    // Retry-After was honoured (a second or more), permanent faults were asked once,
+    // transient ones three times, 404 once (and it is remembered by the layer above).
+    let requests_for = |k: TileKey| server.count(&url(k));
+    assert!(started.elapsed() >= Duration::from_secs(1));
+    assert_eq!(requests_for(faulty[1]), 2);
+    assert_eq!(requests_for(faulty[3]), 1);
+    assert_eq!(requests_for(faulty[4]), 3);
+    assert_eq!(requests_for(faulty[6]), 1);
+    assert_eq!(requests_for(faulty[7]), 1);
+    if let Outcome::Failed(e) = outcome(faulty[7]) {
+        assert!(e.to_string().contains("60000 x 60000"), "{e}");
+    }
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
+fn requests_per_host_stay_under_the_limit() {
+    let server = FaultServer::in_memory();
+    for i in 0..32 {
+        server.put(&format!("/t/{i}"), vec![7u8; 1000]);
+    }
+    server.set_latency(Duration::from_millis(50));
+    let http = client(HttpOptions {
+        per_host: 4,
+        headers: vec![("X-Api-Key".into(), "secret".into())],
+        ..HttpOptions::default()
+    });
+    std::thread::scope(|s| {
+        for i in 0..32 {
+            let http = Arc::clone(&http);
+            let url = server.url(&format!("/t/{i}"));
+            s.spawn(move || {
+                let got = http
+                    .get(&url, None, &Cancel::new())
+                    .expect("get")
+                    .expect("body");
+                assert_eq!(got.fetched.bytes.len(), 1000);
+            });
+        }
+    });
+    assert!(server.max_concurrent() <= 4, "{}", server.max_concurrent());
+    assert!(server.max_concurrent() >= 3, "{}", server.max_concurrent());
+    assert!(
+        server
+            .requests()
+            .iter()
+            .all(|r| r.headers.get("x-api-key").map(String::as_str) == Some("secret"))
+    );
+}
+
+#[test]
+fn a_cancelled_download_stops_mid_body() {
+    let server = FaultServer::in_memory();
+    server.put("/big", vec![1u8; 4 << 20]);
+    server.add_fault("/big", Fault::Stall(Duration::from_secs(5)), None);
+    let http = client(HttpOptions::default());
+    let cancel = Cancel::new();
+    let c2 = cancel.clone();
+    let t = Instant::now();
+    std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(200));
+        c2.cancel();
+    });
+    // The stall outlasts the cancellation; the read returns when the read timeout fires at
+    // the latest, but a cancelled token is never reported as data.
+    let r = http.get(&server.url("/big"), None, &cancel);
+    assert!(
+        r.is_err(),
+        "{:?}",
+        r.map(|b| b.map(|b| b.fetched.bytes.len()))
+    );
+    assert!(t.elapsed() < Duration::from_secs(11));
+}
+
+#[test]
+fn terrain_tiles_from_a_pyramid_carry_its_heights() {
+    let base = scratch("heights");
+    let dir = base.join("dem");
+    tile_srtm(&dir);
+    let http = client(HttpOptions::default());
+    let layer = open_layer(
+        &SourceSpec::parse(&dir.display().to_string()).expect("spec"),
+        LayerKind::Elevation,
+        &http,
+    )
+    .expect("dir");
+    let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
+    let source = RasterTerrainSource::new(
+        vec![pyramid],
+        Vec::new(),
+        Ellipsoid::WGS84,
+        (-100.0, 500.0),
+        MeshOptions::default(),
+    )
+    .expect("source");
+    // Level 7 data in 256-sample tiles: real detail down to engine level 10.
+    assert_eq!(source.max_level(), 10);
+    let cancel = Cancel::new();
+    // The level-10 tile holding 57.7 N 11.95 E (Gothenburg): the Swedish west coast (0-200 m),
+    // real relief (not flat), and an error bound that is measured, not zero.
+    let key = TilingScheme::Geographic
+        .tile_at(11.95f64.to_radians(), 57.7f64.to_radians(), 10)
+        .expect("key");
+    let t = source.load(key, &cancel).expect("load").expect("data");
+    assert!(
+        t.tile.min_height_m >= -50.0 && t.tile.max_height_m < 400.0,
+        "{:?}",
+        (t.tile.min_height_m, t.tile.max_height_m)
+    );
+    assert!(t.tile.max_height_m - t.tile.min_height_m > 20.0);
+    assert!(
+        t.tile.geometric_error_m > 0.5 && t.tile.geometric_error_m < 200.0,
+        "{}",
+        t.tile.geometric_error_m
+    );
+    // Deeper than the data: no data (refinement takes over); outside the SRTM square at
+    // level 5: no data either (nothing finer than the mesh there).
+    assert!(
+        source
+            .load(TileKey::new(11, key.x() * 2, key.y() * 2), &cancel)
+            .expect("load")
+            .is_none()
+    );
+    assert!(
+        source
+            .load(TileKey::new(5, 0, 0), &cancel)
+            .expect("load")
+            .is_none()
+    );
+    let _ = std::fs::remove_dir_all(&base);
+}
