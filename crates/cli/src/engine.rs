@@ -21,8 +21,12 @@ use globus_render::{
     DrawStats, FrameInputs, GlobeRenderer, Lighting, PoolStats, TilePool, TilePoolOptions,
     near_plane_m,
 };
+use globus_stream::decode::DecodeLimits;
+use globus_stream::fetch::{HttpClient, HttpOptions};
+use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid, open_layer};
 use globus_stream::{
-    LayerStats, ProceduralSource, RefinedSource, TerrainLayer, TerrainLayerOptions, TerrainSource,
+    LayerStats, ProceduralSource, RasterTerrainSource, RefinedSource, TerrainLayer,
+    TerrainLayerOptions, TerrainSource,
 };
 use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
@@ -36,7 +40,7 @@ use globus_tiling::{
 pub const DEFAULT_SEED: u64 = 24;
 
 /// Everything that configures a globe.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct GlobeOptions {
     /// Seed of the procedural planet.
     pub seed: u64,
@@ -57,6 +61,12 @@ pub struct GlobeOptions {
     /// Treat the planet's data as ending at this level and invent everything deeper by
     /// procedural refinement ([`RefinedSource`]); `None` generates every level.
     pub refine_below: Option<u8>,
+    /// Elevation layers, bottom first. Empty (with no imagery): the procedural planet.
+    pub terrain: Vec<SourceSpec>,
+    /// Imagery layers, bottom first.
+    pub imagery: Vec<SourceSpec>,
+    /// How tile services are spoken to.
+    pub http: HttpOptions,
 }
 
 impl Default for GlobeOptions {
@@ -71,8 +81,73 @@ impl Default for GlobeOptions {
             workers: TerrainLayerOptions::default().workers,
             mesh: MeshOptions::default(),
             refine_below: None,
+            terrain: Vec::new(),
+            imagery: Vec::new(),
+            http: HttpOptions::default(),
         }
     }
+}
+
+impl GlobeOptions {
+    /// Whether the globe streams real data (else it is the procedural planet).
+    pub fn uses_real_data(&self) -> bool {
+        !(self.terrain.is_empty() && self.imagery.is_empty())
+    }
+}
+
+/// Heights a real Earth's tiles may have before they are loaded (the deepest trench to above
+/// the highest peak): bounds unloaded tiles and places the horizon-culling body.
+const EARTH_HEIGHT_RANGE_M: (f64, f64) = (-11_000.0, 9_000.0);
+
+/// The terrain source `options` describe: the procedural planet (optionally cut at a level
+/// and refined below), or real elevation and imagery layers refined below their data.
+pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainSource>> {
+    if !options.uses_real_data() {
+        return Ok(match options.refine_below {
+            None => Arc::new(
+                ProceduralSource::new(options.seed, options.max_level)
+                    .with_mesh_options(options.mesh),
+            ),
+            Some(level) => {
+                let data = ProceduralSource::new(options.seed, level.min(options.max_level))
+                    .with_mesh_options(options.mesh);
+                Arc::new(RefinedSource::new(
+                    Arc::new(data),
+                    RefineOptions::default(),
+                    options.max_level,
+                    options.mesh,
+                ))
+            }
+        });
+    }
+    let client = Arc::new(HttpClient::new(options.http.clone()));
+    let limits = DecodeLimits::default();
+    let mut elevation = Vec::new();
+    for spec in &options.terrain {
+        let layer = open_layer(spec, LayerKind::Elevation, &client)
+            .map_err(|e| anyhow::anyhow!("terrain {}: {e}", spec.url))?;
+        elevation.push(elevation_pyramid(layer, limits).map_err(anyhow::Error::msg)?);
+    }
+    let mut imagery = Vec::new();
+    for spec in &options.imagery {
+        let layer = open_layer(spec, LayerKind::Imagery, &client)
+            .map_err(|e| anyhow::anyhow!("imagery {}: {e}", spec.url))?;
+        imagery.push(imagery_pyramid(layer, limits));
+    }
+    let raster = RasterTerrainSource::new(
+        elevation,
+        imagery,
+        Ellipsoid::WGS84,
+        EARTH_HEIGHT_RANGE_M,
+        options.mesh,
+    )
+    .map_err(anyhow::Error::msg)?;
+    Ok(Arc::new(RefinedSource::new(
+        Arc::new(raster),
+        RefineOptions::default(),
+        options.max_level,
+        options.mesh,
+    )))
 }
 
 /// What one frame did.
@@ -112,33 +187,25 @@ pub struct Globe {
 }
 
 impl Globe {
-    /// A globe rendering into `colour_format` on `device`.
+    /// A globe rendering into `colour_format` on `device`; fails if a data source named in
+    /// `options` cannot be opened.
     pub fn new(
         device: &wgpu::Device,
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
-    ) -> Self {
-        let source: Arc<dyn TerrainSource> = match options.refine_below {
-            None => Arc::new(
-                ProceduralSource::new(options.seed, options.max_level)
-                    .with_mesh_options(options.mesh),
-            ),
-            Some(level) => {
-                let data = ProceduralSource::new(options.seed, level.min(options.max_level))
-                    .with_mesh_options(options.mesh);
-                Arc::new(RefinedSource::new(
-                    Arc::new(data),
-                    RefineOptions::default(),
-                    options.max_level,
-                    options.mesh,
-                ))
-            }
-        };
+    ) -> anyhow::Result<Self> {
+        let source = terrain_source(options)?;
         let layer = TerrainLayer::new(
             source,
             TerrainLayerOptions {
                 cache_bytes: options.cache_bytes,
-                workers: options.workers,
+                // Loads from tile services mostly wait on the network: enough of them to keep
+                // two hosts at their concurrency limit.
+                workers: if options.uses_real_data() {
+                    options.workers.max(2 * options.http.per_host)
+                } else {
+                    options.workers
+                },
             },
         );
         let pool = TilePool::new(
@@ -154,7 +221,7 @@ impl Globe {
             near_m: 0.01,
             max_level: layer.max_level(),
         };
-        Self {
+        Ok(Self {
             layer,
             renderer: GlobeRenderer::new(device, colour_format, pool),
             options: selection_options,
@@ -162,7 +229,7 @@ impl Globe {
             selection: Selection::default(),
             lighting: None,
             relax_detail: true,
-        }
+        })
     }
 
     /// The planet's ellipsoid.

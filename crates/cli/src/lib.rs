@@ -1,6 +1,7 @@
 //! The Globus application: the engine that wires data, LOD and rendering, and the
 //! subcommands of the `globus` binary.
 
+pub mod config;
 pub mod engine;
 pub mod geo_cmd;
 pub mod mesh_cmd;

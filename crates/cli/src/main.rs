@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
+use globus_app::config::Config;
 use globus_app::engine::{CameraSpec, GlobeOptions};
 use globus_app::geo_cmd;
 use globus_app::mesh_cmd::{self, MeshArgs};
@@ -12,6 +13,7 @@ use globus_app::offscreen::{Offscreen, save_png};
 use globus_app::path::CameraPath;
 use globus_app::tile_cmd::{self, MergeArgs, TileArgs};
 use globus_app::viewer::{self, ViewerOptions};
+use globus_stream::open::SourceSpec;
 use serde_json::json;
 
 #[derive(Parser)]
@@ -49,9 +51,22 @@ enum Command {
 
 #[derive(Args, Clone)]
 struct GlobeArgs {
-    /// Screen-space error bound in pixels.
-    #[arg(long, default_value_t = 2.0)]
-    sse: f64,
+    /// Screen-space error bound in pixels (default 2).
+    #[arg(long)]
+    sse: Option<f64>,
+    /// An elevation layer: a `globus tile` directory, .mbtiles or .pmtiles file, a served
+    /// directory URL, or an http(s) URL template with options after '#'
+    /// (e.g. 'https://host/{z}/{x}/{y}.png#encoding=terrarium&maxzoom=15'). Repeatable;
+    /// later layers lie on top.
+    #[arg(long = "terrain")]
+    terrain: Vec<String>,
+    /// An imagery layer (same forms; WMS with '#wms_layers=NAME'). Repeatable; later layers
+    /// are drawn over earlier ones.
+    #[arg(long = "imagery")]
+    imagery: Vec<String>,
+    /// A TOML file naming sources, budgets, the error bound and HTTP settings.
+    #[arg(long)]
+    config: Option<PathBuf>,
     /// Seed of the procedural planet (the default, 24, raises a mountain range where the
     /// Alps are on Earth).
     #[arg(long, default_value_t = globus_app::engine::DEFAULT_SEED)]
@@ -262,10 +277,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
-    if !(a.sse > 0.0 && a.sse <= 1000.0) {
+    let mut options = GlobeOptions::default();
+    if let Some(path) = &a.config {
+        Config::load(path)?.apply(&mut options);
+    }
+    if let Some(sse) = a.sse {
+        options.max_sse_px = sse;
+    }
+    if !(options.max_sse_px > 0.0 && options.max_sse_px <= 1000.0) {
         bail!(
             "--sse {} must be a pixel error above 0 and at most 1000",
-            a.sse
+            options.max_sse_px
         );
     }
     if !(a.fov_deg > 0.5 && a.fov_deg < 170.0) {
@@ -280,15 +302,25 @@ fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
             a.mesh_error
         );
     }
-    Ok(GlobeOptions {
-        seed: a.seed,
-        max_sse_px: a.sse,
-        mesh: globus_terrain::MeshOptions {
-            error_fraction: a.mesh_error,
-        },
-        refine_below: a.refine_below,
-        ..GlobeOptions::default()
-    })
+    for t in &a.terrain {
+        options
+            .terrain
+            .push(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--terrain: {e}"))?);
+    }
+    for t in &a.imagery {
+        options
+            .imagery
+            .push(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?);
+    }
+    if options.uses_real_data() && a.refine_below.is_some() {
+        bail!("--refine-below cuts the procedural planet; real data is refined below its own end");
+    }
+    options.seed = a.seed;
+    options.mesh = globus_terrain::MeshOptions {
+        error_fraction: a.mesh_error,
+    };
+    options.refine_below = a.refine_below;
+    Ok(options)
 }
 
 fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -383,8 +415,19 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
         check_writable(s)?;
     }
     let mut off = Offscreen::new(&options, width, height)?;
-    let view = camera.view(&off.globe, a.globe.fov_deg, width, height);
-    let frame = off.render_complete(&view, Duration::from_secs_f64(a.timeout_s.max(0.0)))?;
+    let timeout = Duration::from_secs_f64(a.timeout_s.max(0.0));
+    let mut view = camera.view(&off.globe, a.globe.fov_deg, width, height);
+    let mut frame = off.render_complete(&view, timeout)?;
+    // Above the ground of streamed data: the ground is known once the tiles under the
+    // camera have loaded, so place the camera again and finish the picture from there.
+    for _ in 0..3 {
+        let placed = camera.view(&off.globe, a.globe.fov_deg, width, height);
+        if !camera.above_ground || (placed.position - view.position).length() < 0.1 {
+            break;
+        }
+        view = placed;
+        frame = off.render_complete(&view, timeout)?;
+    }
     if !frame.complete {
         eprintln!(
             "globus: warning: gave up waiting for tiles after {:.1} s; the picture is coarser than the SSE bound asks",

@@ -33,7 +33,7 @@ impl Offscreen {
     /// A headless context and a `width` x `height` target.
     pub fn new(options: &GlobeOptions, width: u32, height: u32) -> anyhow::Result<Self> {
         let ctx = GpuContext::headless()?;
-        let globe = Globe::new(&ctx.device, OffscreenTarget::FORMAT, options);
+        let globe = Globe::new(&ctx.device, OffscreenTarget::FORMAT, options)?;
         let target = OffscreenTarget::new(&ctx.device, width, height);
         Ok(Self { ctx, globe, target })
     }

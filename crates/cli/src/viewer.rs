@@ -225,7 +225,7 @@ impl State {
             })
             .context("the window surface is not supported by the adapter")?;
         surface.configure(&ctx.device, &config);
-        let globe = Globe::new(&ctx.device, format, &options.globe);
+        let globe = Globe::new(&ctx.device, format, &options.globe)?;
         let view = options
             .camera
             .view(&globe, options.fov_deg, config.width, config.height);

@@ -17,10 +17,13 @@ use globus_geo::Ellipsoid;
 use globus_tiling::{
     DrawTile, TileBounds, TileInfo, TileKey, TileOracle, TileRequest, TileState, TilingScheme,
 };
-use rustc_hash::FxHashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::scheduler::Outcome;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
+
+/// Most "no data here" answers remembered (16 bytes each).
+const MAX_NO_DATA_KEYS: usize = 1 << 20;
 
 /// Knobs of a terrain layer.
 #[derive(Clone, Copy, Debug)]
@@ -74,6 +77,9 @@ pub struct TerrainLayer {
     scheduler: Scheduler<dyn TerrainSource>,
     cache: LruCache<Arc<TerrainData>>,
     nodes: FxHashMap<TileKey, Node>,
+    /// Tiles the source said it has no data for: never asked again, even after their
+    /// records were dropped with an evicted parent.
+    no_data: FxHashSet<TileKey>,
     ellipsoid: Ellipsoid,
     occluder: Ellipsoid,
     height_range_m: (f64, f64),
@@ -92,6 +98,7 @@ impl TerrainLayer {
             scheduler: Scheduler::new(source, options.workers),
             cache: LruCache::new(options.cache_bytes),
             nodes: FxHashMap::default(),
+            no_data: FxHashSet::default(),
             ellipsoid,
             occluder,
             height_range_m,
@@ -222,7 +229,13 @@ impl TerrainLayer {
                 self.cache.insert(key, data, bytes, self.frame);
                 return;
             }
-            Outcome::NoData => TileState::NoData,
+            Outcome::NoData => {
+                if self.no_data.len() >= MAX_NO_DATA_KEYS {
+                    self.no_data.clear();
+                }
+                self.no_data.insert(key);
+                TileState::NoData
+            }
             Outcome::Failed(e) => {
                 eprintln!("globus: {e}");
                 TileState::Failed
@@ -246,8 +259,9 @@ impl TerrainLayer {
                 if self
                     .nodes
                     .get(&child)
-                    .is_some_and(|n| n.state == TileState::Unloaded)
+                    .is_some_and(|n| n.state != TileState::Loaded)
                 {
+                    // Estimates, failures and "no data" (remembered in `no_data`).
                     self.nodes.remove(&child);
                 }
             }
@@ -322,6 +336,7 @@ impl TileOracle for TerrainLayer {
         };
         let state = match node.state {
             TileState::Loaded if !node.drawable => TileState::Unloaded,
+            TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
             s => s,
         };
         TileInfo {
@@ -330,5 +345,35 @@ impl TileOracle for TerrainLayer {
             state,
             has_children,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ProceduralSource;
+
+    #[test]
+    fn no_data_is_remembered_after_its_record_is_dropped() {
+        let source = Arc::new(ProceduralSource::new(24, 3));
+        let mut layer = TerrainLayer::new(
+            source,
+            TerrainLayerOptions {
+                cache_bytes: 1 << 30,
+                workers: 1,
+            },
+        );
+        let parent = TileKey::new(3, 5, 2);
+        let child = TileKey::new(4, 10, 4);
+        layer.accept(child, Outcome::NoData);
+        assert_eq!(layer.tile(child).state, TileState::NoData);
+        // The parent is evicted: its children's records go, the answer stays.
+        layer.forget(parent);
+        assert!(!layer.nodes.contains_key(&child));
+        assert_eq!(layer.tile(child).state, TileState::NoData);
+        assert_eq!(
+            layer.tile(TileKey::new(4, 11, 4)).state,
+            TileState::Unloaded
+        );
     }
 }

@@ -62,6 +62,31 @@ fn inside(r: &GeoRect, lon: f64, lat: f64) -> bool {
     lon >= r.west - eps && lon <= r.east + eps && lat >= r.south - eps && lat <= r.north + eps
 }
 
+/// Part of a layer's extent over which it fades out towards its bounds.
+const FEATHER_FRACTION: f64 = 0.03;
+
+/// A layer's weight at a point: 0 outside its bounds, rising linearly to 1 over
+/// [`FEATHER_FRACTION`] of its extent inside each edge that is not an edge of the world.
+fn feather(r: &GeoRect, lon: f64, lat: f64) -> f64 {
+    if !inside(r, lon, lat) {
+        return 0.0;
+    }
+    let eps = 1e-9;
+    let width = FEATHER_FRACTION * r.width().min(r.height());
+    let mut w: f64 = 1.0;
+    let mut edge = |d: f64, open: bool| {
+        if open {
+            w = w.min((d / width).clamp(0.0, 1.0));
+        }
+    };
+    let world = GeoRect::WORLD;
+    edge(lon - r.west, r.west > world.west + eps);
+    edge(r.east - lon, r.east < world.east - eps);
+    edge(lat - r.south, r.south > world.south + eps);
+    edge(r.north - lat, r.north < world.north - eps);
+    w
+}
+
 /// Sample spacing (radians of latitude at the equator) of a pyramid's deepest level.
 fn finest_spacing(p: &RasterPyramid<impl Samples>) -> f64 {
     let s = p.spec();
@@ -194,21 +219,28 @@ impl RasterTerrainSource {
             for i in 0..side {
                 let inward = |f: f64| f.clamp(EDGE_NUDGE, 1.0 - EDGE_NUDGE);
                 let (lon, lat) = rect.lon_lat_at(inward(i as f64 / n), inward(j as f64 / n));
-                let mut h = 0.0;
+                // Top to bottom; a layer fades out towards its bounds (where they are not
+                // the world's edges) so its data meets the layer below without a step.
+                let (mut h, mut remaining) = (0.0, 1.0);
                 for (touched, level) in layers.iter_mut().rev() {
                     let spec = *touched.pyramid.spec();
-                    if !inside(&spec.bounds, lon, lat) {
+                    let w = feather(&spec.bounds, lon, lat);
+                    if w <= 0.0 {
                         continue;
                     }
                     let Some((k, px, py)) = spec.locate(lon, lat, *level) else {
                         continue;
                     };
                     if let Some(t) = touched.get(k, cancel)? {
-                        h = bilinear(px, py, t.width, t.height, |x, y| {
+                        let v = bilinear(px, py, t.width, t.height, |x, y| {
                             f64::from(t.heights_m[(y * t.width + x) as usize])
                         });
                         any_data = true;
-                        break;
+                        h += remaining * w * v;
+                        remaining *= 1.0 - w;
+                        if remaining <= 0.0 {
+                            break;
+                        }
                     }
                 }
                 out.push(h);

@@ -138,6 +138,8 @@ struct Queue {
     pending: Vec<(f64, TileKey)>,
     queued: FxHashSet<TileKey>,
     in_flight: FxHashMap<TileKey, Cancel>,
+    /// In flight, but finished and being delivered.
+    done: FxHashSet<TileKey>,
     /// Tiles that failed transiently: failures so far and when they may be tried again.
     backoff: FxHashMap<TileKey, (u32, Duration)>,
     /// The last submitted priorities (to re-queue a retry while still wanted).
@@ -238,6 +240,7 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
                 pending: Vec::new(),
                 queued: FxHashSet::default(),
                 in_flight: FxHashMap::default(),
+                done: FxHashSet::default(),
                 backoff: FxHashMap::default(),
                 wanted: FxHashMap::default(),
                 shutdown: false,
@@ -288,7 +291,7 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
         }
         q.stats.cancelled += old.iter().filter(|k| !q.queued.contains(k)).count() as u64;
         for (key, cancel) in &q.in_flight {
-            if !q.wanted.contains_key(key) && !cancel.is_cancelled() {
+            if !q.wanted.contains_key(key) && !cancel.is_cancelled() && !q.done.contains(key) {
                 cancel.cancel();
                 q.stats.cancelled_in_flight += 1;
             }
@@ -484,8 +487,13 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
             outcome
         };
         if let Some(outcome) = outcome {
+            // Done: a submit that no longer lists it has nothing to cancel.
+            shared.lock().done.insert(key);
             let sent = tx.send((key, outcome)).is_ok();
-            shared.lock().in_flight.remove(&key);
+            let mut q = shared.lock();
+            q.in_flight.remove(&key);
+            q.done.remove(&key);
+            drop(q);
             if !sent {
                 return;
             }

@@ -1,0 +1,164 @@
+//! The real Earth streamed over HTTP from a server on 127.0.0.1: world topography and the
+//! Blue Marble tiled by `globus tile` (the library, as in `tools/real-earth-demo.sh`), served
+//! by a server that also injects faults, rendered on lavapipe. The picture must be complete
+//! (no hole inside the silhouette), the continents where they are, and failed tiles must
+//! leave their ancestors in place.
+
+use std::path::Path;
+use std::time::Duration;
+
+use globus_app::engine::{CameraSpec, GlobeOptions};
+use globus_app::offscreen::{Offscreen, save_png};
+use globus_geo::{Cartographic, Ellipsoid};
+use globus_stream::open::SourceSpec;
+use globus_test_support::http::{Fault, FaultServer};
+use globus_test_support::shared_data;
+use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob, TileLayout};
+use globus_tiling::TilingScheme;
+
+fn tile(kind: JobKind, input: &str, out: &Path, scale_max: Option<u8>) {
+    let job = TileJob {
+        kind,
+        inputs: vec![shared_data(input)],
+        output: out.to_path_buf(),
+        scheme: TilingScheme::Geographic,
+        tile_size: 256,
+        min_level: 0,
+        max_level: scale_max,
+        bounds: None,
+        threads: Some(2),
+        resume: false,
+        force: true,
+        layout: TileLayout::Xyz,
+        shard: None,
+    };
+    globus_tiler::run(&job).unwrap_or_else(|e| panic!("tiling {input}: {e}"));
+}
+
+#[test]
+fn the_real_earth_streams_over_http_through_faults_and_completes() {
+    let root = std::env::temp_dir().join(format!("globus-real-earth-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    tile(
+        JobKind::Dem {
+            encoding: ElevationEncoding::Terrarium,
+            height_scale: Some(25.1),
+        },
+        "earth-topology-2048x1024.png",
+        &root.join("topo"),
+        Some(3),
+    );
+    tile(
+        JobKind::Imagery {
+            format: ImageFormat::parse("jpeg", 85).expect("jpeg"),
+        },
+        "bmng-5400x2700.jpg",
+        &root.join("bmng"),
+        Some(3),
+    );
+    let server = FaultServer::serve_dir(&root);
+    server.set_latency(Duration::from_millis(5));
+    // This view needs topography level 1 and Blue Marble level 0 (128-texel engine tiles
+    // at level 1 match 256-pixel imagery tiles at level 0). Transient faults that retries
+    // get past, and one visible tile that never decodes (its ancestor must stand in).
+    server.add_fault("/topo/1/3/", Fault::Status(503), Some(2));
+    server.add_fault("/topo/1/2/1.png", Fault::Reset, Some(1));
+    server.add_fault(
+        "/bmng/0/1/0.jpg",
+        Fault::RetryAfter {
+            status: 429,
+            secs: 1,
+        },
+        Some(1),
+    );
+    server.add_fault("/topo/1/2/0.png", Fault::NotAnImage, None);
+    let options = GlobeOptions {
+        terrain: vec![SourceSpec::parse(&server.url("/topo")).expect("spec")],
+        imagery: vec![SourceSpec::parse(&server.url("/bmng")).expect("spec")],
+        ..GlobeOptions::default()
+    };
+    let (w, h) = (640, 360);
+    let mut off = Offscreen::new(&options, w, h).expect("a GPU or lavapipe, and the sources");
+    let cam = CameraSpec {
+        lon_deg: 10.0,
+        lat_deg: 30.0,
+        alt_m: 12_000_000.0,
+        heading_deg: 0.0,
+        pitch_deg: -90.0,
+        above_ground: false,
+    };
+    let view = cam.view(&off.globe, 60.0, w, h);
+    let frame = off
+        .render_complete(&view, Duration::from_secs(120))
+        .expect("render");
+    let dir = globus_test_support::output_dir("real_earth");
+    save_png(&frame.image, &dir.join("earth_over_http.png")).expect("save");
+    assert!(frame.complete, "tiles still loading");
+
+    // No hole inside the silhouette: rays that hit the ellipsoid 16 km below the surface must
+    // hit terrain. The sea is the lowest surface here, but the broken level-1 tile is drawn
+    // from its level-0 ancestor, whose flat cells (5.6 degrees, 7.9 across the diagonal) sag
+    // up to 6378 km * (1 - cos 3.98 deg) = 15.4 km below the ellipsoid.
+    let e = Ellipsoid::WGS84;
+    let body = e.grown(-16_000.0);
+    let img = &frame.image;
+    let (mut inside, mut holes) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(view.position, dir).is_some() {
+                inside += 1;
+                if img.pixels[((y * w + x) * 4 + 3) as usize] != 255 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    assert!(inside > 20_000 && holes == 0, "{holes} holes of {inside}");
+
+    // The continents are where they are: deserts are much warmer (red minus blue) than the
+    // sea, seen through the same air (the haze of the atmosphere model greys both).
+    let warmth = |lon: f64, lat: f64| {
+        let p = e.cartographic_to_ecef(Cartographic::new(lon.to_radians(), lat.to_radians(), 0.0));
+        let (x, y) = view.project(p).expect("on screen");
+        let i = ((y as u32 * w + x as u32) * 4) as usize;
+        i32::from(img.pixels[i]) - i32::from(img.pixels[i + 2])
+    };
+    let sea = [("Atlantic", -30.0, 30.0), ("Mediterranean", 18.0, 34.5)];
+    let desert = [
+        ("Sahara (Algeria)", 3.0, 26.0),
+        ("Libyan desert", 24.0, 25.0),
+    ];
+    for (d, dlon, dlat) in desert {
+        for (s, slon, slat) in sea {
+            let (a, b) = (warmth(dlon, dlat), warmth(slon, slat));
+            assert!(a - b > 40, "{d} (red - blue {a}) vs {s} ({b})");
+        }
+    }
+
+    // Every fault was met: the transient ones retried, the broken tile failed once and for
+    // all (asked once), and its ancestor filled its place in the complete picture above.
+    let stats = off.globe.layer().scheduler_stats();
+    assert!(stats.retries >= 3, "{stats:?}");
+    assert_eq!(stats.failed, 1, "{stats:?}");
+    assert_eq!(server.count("/topo/1/2/0.png"), 1);
+    assert_eq!(server.count("/bmng/0/1/0.jpg"), 2);
+    assert!(frame.load_ms >= 1000.0, "Retry-After: 1 was honoured");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn sources_that_cannot_be_opened_fail_with_their_name() {
+    let options = GlobeOptions {
+        terrain: vec![SourceSpec::parse("/nonexistent/globus/dem").expect("spec")],
+        ..GlobeOptions::default()
+    };
+    let err = match Offscreen::new(&options, 64, 64) {
+        Ok(_) => panic!("opened a missing source"),
+        Err(e) => format!("{e:#}"),
+    };
+    assert!(
+        err.contains("/nonexistent/globus/dem") && err.contains("metadata.json"),
+        "{err}"
+    );
+}
