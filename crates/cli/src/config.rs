@@ -15,6 +15,10 @@
 //! timeout_s = 15
 //! headers = { "X-Api-Key" = "..." }
 //!
+//! [disk_cache]            # tiles from services kept on disk: a second session works offline
+//! dir = "/var/cache/globus"
+//! max_mb = 2048
+//!
 //! [[terrain]]
 //! url = "https://tiles.example/terrarium/{z}/{x}/{y}.png"
 //! encoding = "terrarium"
@@ -31,6 +35,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use globus_stream::fetch::DiskCacheOptions;
 use globus_stream::open::SourceSpec;
 use serde::Deserialize;
 
@@ -52,6 +57,8 @@ pub struct Config {
     pub refine_to_level: Option<u8>,
     /// HTTP settings.
     pub http: Option<HttpConfig>,
+    /// On-disk tile cache.
+    pub disk_cache: Option<DiskCacheConfig>,
     /// Elevation layers, bottom first.
     #[serde(default)]
     pub terrain: Vec<SourceSpec>,
@@ -73,6 +80,28 @@ pub struct HttpConfig {
     /// Extra headers on every request.
     #[serde(default)]
     pub headers: BTreeMap<String, String>,
+}
+
+/// The `[disk_cache]` table.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiskCacheConfig {
+    /// The folder.
+    pub dir: std::path::PathBuf,
+    /// Most MiB kept (default 2048).
+    pub max_mb: Option<u64>,
+}
+
+/// Default size of the disk cache, MiB.
+pub const DEFAULT_DISK_CACHE_MB: u64 = 2048;
+
+/// Disk cache options for `dir` holding at most `max_mb` MiB.
+pub fn disk_cache_options(dir: &Path, max_mb: u64) -> DiskCacheOptions {
+    DiskCacheOptions {
+        dir: dir.to_path_buf(),
+        max_bytes: max_mb << 20,
+        default_fresh_for: Duration::from_secs(7 * 86_400),
+    }
 }
 
 impl Config {
@@ -102,6 +131,11 @@ impl Config {
             && l > globus_tiling::TileKey::MAX_LEVEL
         {
             bail!("refine_to_level = {l} is deeper than the deepest level, 29");
+        }
+        if let Some(d) = &self.disk_cache
+            && d.max_mb == Some(0)
+        {
+            bail!("disk_cache.max_mb must be above 0");
         }
         if let Some(h) = &self.http {
             if h.per_host == Some(0) {
@@ -149,7 +183,87 @@ impl Config {
                 .headers
                 .extend(h.headers.iter().map(|(k, v)| (k.clone(), v.clone())));
         }
+        if let Some(d) = &self.disk_cache {
+            options.disk_cache = Some(disk_cache_options(
+                &d.dir,
+                d.max_mb.unwrap_or(DEFAULT_DISK_CACHE_MB),
+            ));
+        }
         options.terrain.extend(self.terrain.iter().cloned());
         options.imagery.extend(self.imagery.iter().cloned());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> anyhow::Result<Config> {
+        let c: Config = toml::from_str(text)?;
+        c.check()?;
+        Ok(c)
+    }
+
+    #[test]
+    fn a_full_file_configures_the_globe() {
+        let c = parse(
+            r#"
+            sse = 3.5
+            cache_mb = 256
+            gpu_tiles = 512
+            workers = 12
+            refine_to_level = 22
+            [http]
+            user_agent = "test/1"
+            per_host = 4
+            timeout_s = 7
+            headers = { "X-Api-Key" = "k" }
+            [disk_cache]
+            dir = "/tmp/globus-cache"
+            [[terrain]]
+            url = "https://t.example/{z}/{x}/{y}.png"
+            encoding = "terrarium"
+            maxzoom = 15
+            [[imagery]]
+            url = "https://{s}.i.example/{z}/{x}/{y}.jpg"
+            subdomains = ["a", "b"]
+            "#,
+        )
+        .expect("valid");
+        let mut o = GlobeOptions::default();
+        c.apply(&mut o);
+        assert_eq!(o.max_sse_px, 3.5);
+        assert_eq!(o.cache_bytes, 256 << 20);
+        assert_eq!((o.gpu_slots, o.workers, o.max_level), (512, 12, 22));
+        assert_eq!(o.http.user_agent, "test/1");
+        assert_eq!(o.http.per_host, 4);
+        assert_eq!(o.http.read_timeout, Duration::from_secs(7));
+        assert_eq!(
+            o.http.headers,
+            vec![("X-Api-Key".to_string(), "k".to_string())]
+        );
+        let d = o.disk_cache.expect("disk cache");
+        assert_eq!(d.max_bytes, DEFAULT_DISK_CACHE_MB << 20);
+        assert_eq!(o.terrain.len(), 1);
+        assert_eq!(o.terrain[0].maxzoom, Some(15));
+        assert_eq!(
+            o.imagery[0].subdomains.as_deref(),
+            Some(&["a".to_string(), "b".to_string()][..])
+        );
+    }
+
+    #[test]
+    fn bad_files_are_refused() {
+        for bad in [
+            "sse = -1",
+            "workers = 0",
+            "colour = 'red'",
+            "[http]\nper_host = 0",
+            "[[terrain]]\nurl = 'x'\nencodin = 'terrarium'",
+            "[disk_cache]\ndir = '/tmp'\nmax_mb = 0",
+            "refine_to_level = 40",
+        ] {
+            assert!(parse(bad).is_err(), "{bad}");
+        }
     }
 }

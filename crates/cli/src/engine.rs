@@ -22,7 +22,7 @@ use globus_render::{
     near_plane_m,
 };
 use globus_stream::decode::DecodeLimits;
-use globus_stream::fetch::{HttpClient, HttpOptions};
+use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
 use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid, open_layer};
 use globus_stream::{
     LayerStats, ProceduralSource, RasterTerrainSource, RefinedSource, TerrainLayer,
@@ -67,6 +67,8 @@ pub struct GlobeOptions {
     pub imagery: Vec<SourceSpec>,
     /// How tile services are spoken to.
     pub http: HttpOptions,
+    /// An on-disk cache for tiles from services (none by default).
+    pub disk_cache: Option<DiskCacheOptions>,
 }
 
 impl Default for GlobeOptions {
@@ -84,6 +86,7 @@ impl Default for GlobeOptions {
             terrain: Vec::new(),
             imagery: Vec::new(),
             http: HttpOptions::default(),
+            disk_cache: None,
         }
     }
 }
@@ -124,14 +127,24 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
     let limits = DecodeLimits::default();
     let mut elevation = Vec::new();
     for spec in &options.terrain {
-        let layer = open_layer(spec, LayerKind::Elevation, &client)
-            .map_err(|e| anyhow::anyhow!("terrain {}: {e}", spec.url))?;
+        let layer = open_layer(
+            spec,
+            LayerKind::Elevation,
+            &client,
+            options.disk_cache.as_ref(),
+        )
+        .map_err(|e| anyhow::anyhow!("terrain {}: {e}", spec.url))?;
         elevation.push(elevation_pyramid(layer, limits).map_err(anyhow::Error::msg)?);
     }
     let mut imagery = Vec::new();
     for spec in &options.imagery {
-        let layer = open_layer(spec, LayerKind::Imagery, &client)
-            .map_err(|e| anyhow::anyhow!("imagery {}: {e}", spec.url))?;
+        let layer = open_layer(
+            spec,
+            LayerKind::Imagery,
+            &client,
+            options.disk_cache.as_ref(),
+        )
+        .map_err(|e| anyhow::anyhow!("imagery {}: {e}", spec.url))?;
         imagery.push(imagery_pyramid(layer, limits));
     }
     let raster = RasterTerrainSource::new(
@@ -240,6 +253,11 @@ impl Globe {
     /// The data layer.
     pub fn layer(&self) -> &TerrainLayer {
         &self.layer
+    }
+
+    /// The data layer, for benchmarks that inspect it.
+    pub fn layer_mut(&mut self) -> &mut TerrainLayer {
+        &mut self.layer
     }
 
     /// The last selection.

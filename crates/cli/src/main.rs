@@ -67,6 +67,9 @@ struct GlobeArgs {
     /// A TOML file naming sources, budgets, the error bound and HTTP settings.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Keep tiles from services in this folder (2 GiB at most), so later sessions work offline.
+    #[arg(long = "disk-cache")]
+    disk_cache: Option<PathBuf>,
     /// Seed of the procedural planet (the default, 24, raises a mountain range where the
     /// Alps are on Earth).
     #[arg(long, default_value_t = globus_app::engine::DEFAULT_SEED)]
@@ -312,6 +315,12 @@ fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
             .imagery
             .push(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?);
     }
+    if let Some(dir) = &a.disk_cache {
+        options.disk_cache = Some(globus_app::config::disk_cache_options(
+            dir,
+            globus_app::config::DEFAULT_DISK_CACHE_MB,
+        ));
+    }
     if options.uses_real_data() && a.refine_below.is_some() {
         bail!("--refine-below cuts the procedural planet; real data is refined below its own end");
     }
@@ -483,6 +492,8 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&a.path)
         .with_context(|| format!("cannot read {}", a.path.display()))?;
     let mut off = Offscreen::new(&options, width, height)?;
+    off.globe.layer_mut().track_usage();
+    let sse_px = options.max_sse_px;
     let path = {
         let globe = &off.globe;
         CameraPath::parse(&text, &a.path.display().to_string(), |lon, lat| {
@@ -528,7 +539,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     let mut summary = serde_json::Map::new();
     summary.insert("frames".into(), json!(frames));
     summary.insert("size".into(), json!([width, height]));
-    summary.insert("sse_px".into(), json!(a.globe.sse));
+    summary.insert("sse_px".into(), json!(sse_px));
     summary.insert("mesh_error".into(), json!(a.globe.mesh_error));
     for (k, name) in names.iter().enumerate() {
         let mut v: Vec<f64> = samples.iter().map(|s| s[k]).collect();
@@ -556,6 +567,27 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     summary.insert("tiles_requested".into(), json!(st.requested));
     summary.insert("tiles_loaded".into(), json!(st.loaded));
     summary.insert("requests_cancelled".into(), json!(st.cancelled));
+    summary.insert(
+        "loads_stopped_in_flight".into(),
+        json!(st.cancelled_in_flight),
+    );
+    summary.insert("retries".into(), json!(st.retries));
+    summary.insert("tiles_failed".into(), json!(st.failed));
+    if let Some(u) = off.globe.layer().usage() {
+        summary.insert("loaded_never_drawn".into(), json!(u.loaded_never_drawn));
+        summary.insert(
+            "loaded_never_drawn_fraction".into(),
+            json!(u.loaded_never_drawn as f64 / u.loaded.max(1) as f64),
+        );
+        summary.insert(
+            "loaded_again_while_cached".into(),
+            json!(u.loaded_again_while_cached),
+        );
+        summary.insert(
+            "loaded_again_after_eviction".into(),
+            json!(u.loaded_again_after_eviction),
+        );
+    }
     summary.insert("adapter".into(), json!(off.ctx.adapter_description()));
     println!("{}", serde_json::Value::Object(summary));
     Ok(())

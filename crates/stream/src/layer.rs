@@ -61,6 +61,26 @@ pub struct LayerStats {
     pub over_budget: bool,
 }
 
+/// What became of loads over a session, for benchmarks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct UsageStats {
+    /// Tiles that arrived loaded.
+    pub loaded: u64,
+    /// Distinct loaded tiles that were never in a draw list.
+    pub loaded_never_drawn: u64,
+    /// Loads of a tile that was in the cache at the time (should be none).
+    pub loaded_again_while_cached: u64,
+    /// Loads of a tile loaded before and evicted since.
+    pub loaded_again_after_eviction: u64,
+}
+
+#[derive(Default)]
+struct Usage {
+    drawn: FxHashSet<TileKey>,
+    loaded: FxHashSet<TileKey>,
+    stats: UsageStats,
+}
+
 /// What selection needs to know about one tile, stored inline.
 #[derive(Clone, Copy, Debug)]
 struct Node {
@@ -80,6 +100,8 @@ pub struct TerrainLayer {
     /// Tiles the source said it has no data for: never asked again, even after their
     /// records were dropped with an evicted parent.
     no_data: FxHashSet<TileKey>,
+    /// Load and draw bookkeeping, when a benchmark asked for it.
+    usage: Option<Usage>,
     ellipsoid: Ellipsoid,
     occluder: Ellipsoid,
     height_range_m: (f64, f64),
@@ -99,6 +121,7 @@ impl TerrainLayer {
             cache: LruCache::new(options.cache_bytes),
             nodes: FxHashMap::default(),
             no_data: FxHashSet::default(),
+            usage: None,
             ellipsoid,
             occluder,
             height_range_m,
@@ -145,6 +168,20 @@ impl TerrainLayer {
         self.cache.get(key)
     }
 
+    /// Starts remembering every tile loaded and drawn (for benchmarks: it grows with the
+    /// session).
+    pub fn track_usage(&mut self) {
+        self.usage = Some(Usage::default());
+    }
+
+    /// Load and draw bookkeeping since [`TerrainLayer::track_usage`].
+    pub fn usage(&self) -> Option<UsageStats> {
+        self.usage.as_ref().map(|u| UsageStats {
+            loaded_never_drawn: u.loaded.difference(&u.drawn).count() as u64,
+            ..u.stats
+        })
+    }
+
     /// Scheduler counters.
     pub fn scheduler_stats(&self) -> SchedulerStats {
         self.scheduler.stats()
@@ -169,6 +206,9 @@ impl TerrainLayer {
                 }
                 key = k.parent();
             }
+        }
+        if let Some(u) = &mut self.usage {
+            u.drawn.extend(drawn.iter().map(|d| d.key));
         }
         let mut stats = LayerStats::default();
         for (key, outcome) in self.scheduler.drain() {
@@ -199,6 +239,14 @@ impl TerrainLayer {
     fn accept(&mut self, key: TileKey, outcome: Outcome<TerrainData>) {
         let state = match outcome {
             Outcome::Loaded(data) => {
+                if let Some(u) = &mut self.usage {
+                    u.stats.loaded += 1;
+                    if self.cache.contains(key) {
+                        u.stats.loaded_again_while_cached += 1;
+                    } else if !u.loaded.insert(key) {
+                        u.stats.loaded_again_after_eviction += 1;
+                    }
+                }
                 let bytes = data.byte_size();
                 let node = Node {
                     bounds: data.mesh.bounds,

@@ -21,7 +21,7 @@ mod scheduler;
 mod source;
 
 pub use cache::LruCache;
-pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions};
+pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions, UsageStats};
 pub use procedural::ProceduralSource;
 pub use raster_terrain::RasterTerrainSource;
 pub use refined::RefinedSource;

@@ -28,8 +28,8 @@ use serde::Deserialize;
 use crate::decode::{DecodeLimits, HeightImage, Rgba, decode_elevation, decode_image};
 use crate::fetch::pmtiles::{FileRange, HttpRange};
 use crate::fetch::{
-    Cancel, DirectoryFetch, Fetch, HttpClient, MbTilesFetch, PmTilesFetch, TemplateFetch, WmsFetch,
-    WmsVersion,
+    CachedFetch, Cancel, DirectoryFetch, DiskCacheOptions, Fetch, FetchError, HttpClient,
+    MbTilesFetch, PmTilesFetch, TemplateFetch, WmsFetch, WmsVersion,
 };
 use crate::pyramid::{PyramidSpec, RasterPyramid, SampleGrid};
 
@@ -195,7 +195,15 @@ pub fn open_layer(
     spec: &SourceSpec,
     kind: LayerKind,
     client: &Arc<HttpClient>,
+    disk_cache: Option<&DiskCacheOptions>,
 ) -> Result<OpenedLayer, String> {
+    // Tile services go through the disk cache, if there is one; files need none.
+    let cached = |f: Box<dyn Fetch>| -> Result<Arc<dyn Fetch>, String> {
+        Ok(match disk_cache {
+            Some(o) => Arc::new(CachedFetch::new(f, o.clone())?),
+            None => Arc::from(f),
+        })
+    };
     let url = spec.url.as_str();
     let is_http = url.starts_with("http://") || url.starts_with("https://");
     let (fetch, meta): (Arc<dyn Fetch>, Meta) = if let Some(layers) = &spec.wms_layers {
@@ -215,7 +223,7 @@ pub fn open_layer(
             spec.format.as_deref().unwrap_or("image/png"),
             size,
         )?;
-        (Arc::new(w), Meta::default())
+        (cached(Box::new(w))?, Meta::default())
     } else if url.ends_with(".pmtiles") {
         let (fetch, json): (Arc<dyn Fetch>, serde_json::Value) = if is_http {
             let p = PmTilesFetch::open(HttpRange::new(Arc::clone(client), url))?;
@@ -252,7 +260,12 @@ pub fn open_layer(
             .collect();
         let scheme = parse_scheme(spec.scheme.as_deref(), TilingScheme::WebMercator)?;
         (
-            Arc::new(TemplateFetch::new(Arc::clone(client), url, &subs, scheme)?),
+            cached(Box::new(TemplateFetch::new(
+                Arc::clone(client),
+                url,
+                &subs,
+                scheme,
+            )?))?,
             Meta {
                 scheme: Some(scheme),
                 ..Meta::default()
@@ -262,12 +275,7 @@ pub fn open_layer(
         // A served `globus tile` directory.
         let base = url.trim_end_matches('/');
         let meta_url = format!("{base}/metadata.json");
-        let body = client
-            .get(&meta_url, None, &Cancel::new())
-            .map_err(|e| format!("{meta_url}: {e}"))?
-            .ok_or_else(|| format!("{meta_url}: not found (a served directory needs its metadata.json, or give a {{z}}/{{x}}/{{y}} template)"))?;
-        let json: serde_json::Value =
-            serde_json::from_slice(&body.fetched.bytes).map_err(|e| format!("{meta_url}: {e}"))?;
+        let json = served_metadata(client, &meta_url, disk_cache)?;
         let meta = meta_from_json(&json);
         let ext = meta.format.clone().unwrap_or_else(|| "png".into());
         let row = if meta.tms { "{-y}" } else { "{y}" };
@@ -277,12 +285,12 @@ pub fn open_layer(
             meta.scheme.unwrap_or(TilingScheme::WebMercator),
         )?;
         (
-            Arc::new(TemplateFetch::new(
+            cached(Box::new(TemplateFetch::new(
                 Arc::clone(client),
                 &template,
                 &[],
                 scheme,
-            )?),
+            )?))?,
             meta,
         )
     } else {
@@ -366,6 +374,40 @@ pub fn open_layer(
         },
         encoding,
     })
+}
+
+/// A served directory's `metadata.json`, kept in the disk cache (if any) so the layer opens
+/// offline too.
+fn served_metadata(
+    client: &HttpClient,
+    url: &str,
+    disk_cache: Option<&DiskCacheOptions>,
+) -> Result<serde_json::Value, String> {
+    let copy = disk_cache.map(|o| {
+        o.dir.join(format!(
+            "{:016x}.json",
+            crate::fetch::disk_cache::origin_hash(url)
+        ))
+    });
+    let fetched = client.get(url, None, &Cancel::new());
+    let bytes = match (fetched, &copy) {
+        (Ok(Some(body)), _) => {
+            if let Some(path) = &copy {
+                let _ = std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")));
+                let _ = std::fs::write(path, &body.fetched.bytes);
+            }
+            body.fetched.bytes
+        }
+        (Ok(None), _) => {
+            return Err(format!(
+                "{url}: not found (a served directory needs its metadata.json, or give a {{z}}/{{x}}/{{y}} template)"
+            ));
+        }
+        (Err(e @ FetchError::Transient { .. }), Some(path)) => std::fs::read(path)
+            .map_err(|_| format!("{url}: {e} (and no copy in the disk cache)"))?,
+        (Err(e), _) => return Err(format!("{url}: {e}")),
+    };
+    serde_json::from_slice(&bytes).map_err(|e| format!("{url}: {e}"))
 }
 
 fn pm_meta<R: crate::fetch::RangeRead>(p: &PmTilesFetch<R>) -> serde_json::Value {

@@ -99,7 +99,8 @@ fn directory_mbtiles_pmtiles_and_pmtiles_over_http_serve_the_same_tiles() {
         .iter()
         .map(|s| {
             let spec = SourceSpec::parse(s).expect("spec");
-            open_layer(&spec, LayerKind::Elevation, &http).unwrap_or_else(|e| panic!("{s}: {e}"))
+            open_layer(&spec, LayerKind::Elevation, &http, None)
+                .unwrap_or_else(|e| panic!("{s}: {e}"))
         })
         .collect();
     for (s, l) in specs.iter().zip(&layers) {
@@ -216,6 +217,7 @@ fn every_fault_ends_as_a_counted_tile_failure_and_the_rest_completes() {
         &SourceSpec::parse(&server.url("/dem")).expect("spec"),
         LayerKind::Elevation,
         &http,
+        None,
     )
     .expect("served directory");
     let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
@@ -365,6 +367,7 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
         &SourceSpec::parse(&dir.display().to_string()).expect("spec"),
         LayerKind::Elevation,
         &http,
+        None,
     )
     .expect("dir");
     let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
@@ -411,4 +414,140 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
             .is_none()
     );
     let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
+fn the_disk_cache_serves_a_second_session_with_the_server_down() {
+    use globus_stream::fetch::{CachedFetch, DiskCacheOptions, Fetch, TemplateFetch};
+    let base = scratch("diskcache");
+    let dir = base.join("dem");
+    tile_srtm(&dir);
+    let keys = keys_in(&dir);
+    let cache_dir = base.join("cache");
+    let options = |max_bytes| DiskCacheOptions {
+        dir: cache_dir.clone(),
+        max_bytes,
+        default_fresh_for: Duration::from_secs(86_400),
+    };
+    let http = client(HttpOptions {
+        connect_timeout: Duration::from_millis(500),
+        ..HttpOptions::default()
+    });
+    let session = |server: &FaultServer, max_bytes| {
+        let template = format!("{}/{{z}}/{{x}}/{{y}}.png", server.url("/dem"));
+        let f = TemplateFetch::new(Arc::clone(&http), &template, &[], TilingScheme::Geographic)
+            .expect("template");
+        CachedFetch::new(Box::new(f), options(max_bytes)).expect("cache")
+    };
+    let cancel = Cancel::new();
+    let want = |k: TileKey| {
+        std::fs::read(dir.join(format!("{}/{}/{}.png", k.level(), k.x(), k.y()))).expect("tile")
+    };
+
+    // Fresh for an hour: a second session does not ask the server at all.
+    let fresh = FaultServer::serve_dir(&base);
+    fresh.set_cache_control(Some("public, max-age=3600"));
+    let first = session(&fresh, 1 << 30);
+    for &k in &keys {
+        assert_eq!(
+            first.fetch(k, &cancel).expect("fetch").map(|f| f.bytes),
+            Some(want(k))
+        );
+    }
+    let asked = fresh.count("/dem/");
+    let second = session(&fresh, 1 << 30);
+    for &k in &keys {
+        assert_eq!(
+            second.fetch(k, &cancel).expect("fetch").map(|f| f.bytes),
+            Some(want(k))
+        );
+    }
+    assert_eq!(
+        fresh.count("/dem/"),
+        asked,
+        "fresh entries are served from disk"
+    );
+    assert_eq!(second.stats().fresh_hits, keys.len() as u64);
+
+    // `no-cache`: stale at once, so a session online asks again, and a session with the
+    // server gone serves the stale copies (and knows what has no data).
+    let _ = std::fs::remove_dir_all(&cache_dir);
+    let revalidate = FaultServer::serve_dir(&base);
+    revalidate.set_cache_control(Some("no-cache"));
+    let layer_spec = SourceSpec::parse(&revalidate.url("/dem")).expect("spec");
+    let online = open_layer(
+        &layer_spec,
+        LayerKind::Elevation,
+        &http,
+        Some(&options(1 << 30)),
+    )
+    .expect("open online");
+    let empty = TileKey::new(5, 0, 0);
+    for &k in keys.iter().chain([&empty]) {
+        let _ = online.fetch.fetch(k, &cancel).expect("fetch");
+    }
+    let warm = session(&revalidate, 1 << 30);
+    let _ = warm.fetch(keys[0], &cancel).expect("fetch");
+    assert_eq!(
+        warm.stats().misses,
+        1,
+        "a no-cache entry is fetched again while online"
+    );
+    drop(revalidate);
+
+    let offline = open_layer(
+        &layer_spec,
+        LayerKind::Elevation,
+        &http,
+        Some(&options(1 << 30)),
+    )
+    .expect("the layer opens offline from the cached metadata");
+    assert_eq!(offline.spec.max_level, MAX_LEVEL);
+    for &k in &keys {
+        let got = offline.fetch.fetch(k, &cancel);
+        assert_eq!(
+            got.expect("served stale").map(|f| f.bytes),
+            Some(want(k)),
+            "{k}"
+        );
+    }
+    assert_eq!(offline.fetch.fetch(empty, &cancel), Ok(None));
+    // A tile never fetched is a transient failure offline, not a panic or "no data".
+    let never = TileKey::new(7, 0, 0);
+    assert!(matches!(
+        offline.fetch.fetch(never, &cancel),
+        Err(globus_stream::fetch::FetchError::Transient { .. })
+    ));
+
+    // The size cap holds: a cache capped at half the pyramid keeps recent tiles and no more.
+    let _ = std::fs::remove_dir_all(&cache_dir);
+    let pyramid_bytes: u64 = keys.iter().map(|&k| want(k).len() as u64).sum();
+    let cap = pyramid_bytes / 2;
+    let capped_server = FaultServer::serve_dir(&base);
+    let capped = session(&capped_server, cap);
+    for &k in &keys {
+        let _ = capped.fetch(k, &cancel).expect("fetch");
+    }
+    let on_disk: u64 = walk_bytes(&cache_dir);
+    assert!(on_disk <= cap, "{on_disk} bytes on disk, cap {cap}");
+    assert!(capped.stats().evicted > 0);
+    // The last tile fetched is still there.
+    let last = *keys.last().expect("keys");
+    let before = capped_server.count("/dem/");
+    let _ = capped.fetch(last, &cancel).expect("fetch");
+    assert_eq!(capped_server.count("/dem/"), before);
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+fn walk_bytes(dir: &Path) -> u64 {
+    let mut total = 0;
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let m = e.metadata().expect("metadata");
+        total += if m.is_dir() {
+            walk_bytes(&e.path())
+        } else {
+            m.len()
+        };
+    }
+    total
 }

@@ -8,6 +8,7 @@
 //! scheduler's business; decoding is the source's.
 
 pub mod dir;
+pub mod disk_cache;
 pub mod http;
 pub mod mbtiles;
 pub mod pmtiles;
@@ -21,6 +22,7 @@ use std::time::Duration;
 use globus_tiling::{TileKey, TilingScheme};
 
 pub use dir::DirectoryFetch;
+pub use disk_cache::{CachedFetch, DiskCacheOptions, DiskCacheStats};
 pub use http::{HttpClient, HttpOptions, TemplateFetch};
 pub use mbtiles::MbTilesFetch;
 pub use pmtiles::{PmTilesFetch, RangeRead};
