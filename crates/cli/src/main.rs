@@ -137,14 +137,33 @@ struct RenderArgs {
 #[derive(Args)]
 struct BenchArgs {
     /// Camera path JSON (see paths/alps-dive.json).
-    #[arg(long)]
-    path: PathBuf,
+    #[arg(long, conflicts_with_all = ["from", "to", "soak"], required_unless_present_any = ["from", "soak"])]
+    path: Option<PathBuf>,
+    /// Soak test: fly between random views for this many seconds in real time, printing one
+    /// JSON line per second (resident memory, cache bytes, GPU tiles, loads, failures).
+    #[arg(long, conflicts_with_all = ["from", "to"])]
+    soak: Option<f64>,
+    /// Jump benchmark: load everything at this camera (LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG),
+    /// then jump to --to and time how the new view fills in.
+    #[arg(long, allow_hyphen_values = true, requires = "to")]
+    from: Option<String>,
+    /// Where the jump goes.
+    #[arg(long, allow_hyphen_values = true, requires = "from")]
+    to: Option<String>,
     /// Frame size, WxH.
     #[arg(long, default_value = "1920x1080")]
     size: String,
     /// Frames per second of path time.
     #[arg(long, default_value_t = 30.0)]
     fps: f64,
+    /// Play the path in real time (a frame waits for its moment, as in a viewer), instead of
+    /// as fast as frames render; for streaming figures, where loads race the camera.
+    #[arg(long)]
+    realtime: bool,
+    /// Jump benchmark only: prepare every frame (selection, loads, uploads) but rasterise
+    /// only the first, so software rendering does not take the cores the loaders need.
+    #[arg(long = "no-draw")]
+    no_draw: bool,
     #[command(flatten)]
     globe: GlobeArgs,
 }
@@ -489,21 +508,57 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     if !(a.fps > 0.0 && a.fps <= 1000.0) {
         bail!("--fps {} must be above 0 and at most 1000", a.fps);
     }
-    let text = std::fs::read_to_string(&a.path)
-        .with_context(|| format!("cannot read {}", a.path.display()))?;
+    if let (Some(from), Some(to)) = (&a.from, &a.to) {
+        return bench_jump(&a, &options, from, to, width, height);
+    }
+    if let Some(seconds) = a.soak {
+        if !(seconds > 0.0 && seconds.is_finite()) {
+            bail!("--soak {seconds} must be a positive number of seconds");
+        }
+        return bench_soak(&a, &options, seconds, width, height);
+    }
+    let Some(path_file) = &a.path else {
+        bail!("bench needs --path FILE.json, or --from CAMERA --to CAMERA");
+    };
+    let text = std::fs::read_to_string(path_file)
+        .with_context(|| format!("cannot read {}", path_file.display()))?;
     let mut off = Offscreen::new(&options, width, height)?;
-    off.globe.layer_mut().track_usage();
     let sse_px = options.max_sse_px;
+    let origin = path_file.display().to_string();
+    if options.uses_real_data() {
+        // Streamed data knows its ground only once tiles are loaded: load the ground under
+        // every keyframe given above the ground (from 15 km up, looking down) first.
+        let points = std::cell::RefCell::new(Vec::new());
+        CameraPath::parse(&text, &origin, |lon, lat| {
+            points.borrow_mut().push((lon, lat));
+            0.0
+        })?;
+        for (lon, lat) in points.into_inner() {
+            let look_down = parse_camera(&format!("{lon},{lat},15000,0,-90"), false)?;
+            let view = look_down.view(&off.globe, a.globe.fov_deg, width, height);
+            off.render_complete(&view, Duration::from_secs(120))?;
+        }
+    }
     let path = {
         let globe = &off.globe;
-        CameraPath::parse(&text, &a.path.display().to_string(), |lon, lat| {
+        CameraPath::parse(&text, &origin, |lon, lat| {
             globe.ground_height_m(lon.to_radians(), lat.to_radians())
         })?
     };
+    // Counting starts with the path.
+    off.globe.layer_mut().track_usage();
     let frames = (path.duration() * a.fps).floor() as usize + 1;
     let mut samples: Vec<[f64; 7]> = Vec::with_capacity(frames);
+    let clock = Instant::now();
     for i in 0..frames {
-        let pose = path.pose(i as f64 / a.fps);
+        let t = i as f64 / a.fps;
+        if a.realtime {
+            let ahead = t - clock.elapsed().as_secs_f64();
+            if ahead > 0.0 {
+                std::thread::sleep(Duration::from_secs_f64(ahead));
+            }
+        }
+        let pose = path.pose(t);
         let camera = CameraSpec {
             lon_deg: pose.lon,
             lat_deg: pose.lat,
@@ -540,6 +595,8 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     summary.insert("frames".into(), json!(frames));
     summary.insert("size".into(), json!([width, height]));
     summary.insert("sse_px".into(), json!(sse_px));
+    summary.insert("realtime".into(), json!(a.realtime));
+    summary.insert("wall_s".into(), json!(clock.elapsed().as_secs_f64()));
     summary.insert("mesh_error".into(), json!(a.globe.mesh_error));
     for (k, name) in names.iter().enumerate() {
         let mut v: Vec<f64> = samples.iter().map(|s| s[k]).collect();
@@ -590,5 +647,219 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     }
     summary.insert("adapter".into(), json!(off.ctx.adapter_description()));
     println!("{}", serde_json::Value::Object(summary));
+    Ok(())
+}
+
+/// The jump benchmark: everything loaded at one view, then a jump to another; reports when
+/// the first frame of the new view is out (and whether it has holes), and when every tile its
+/// selection wants is loaded and resident.
+fn bench_jump(
+    a: &BenchArgs,
+    options: &GlobeOptions,
+    from: &str,
+    to: &str,
+    width: u32,
+    height: u32,
+) -> anyhow::Result<()> {
+    let from = parse_camera(from, false).context("--from")?;
+    let to = parse_camera(to, false).context("--to")?;
+    let mut off = Offscreen::new(options, width, height)?;
+    off.globe.layer_mut().track_usage();
+    let view_a = from.view(&off.globe, a.globe.fov_deg, width, height);
+    let settled = off.render_complete(&view_a, Duration::from_secs(300))?;
+    if !settled.complete {
+        bail!("the first view did not finish loading in 300 s");
+    }
+    let before = off.globe.layer().scheduler_stats();
+    let view_b = to.view(&off.globe, a.globe.fov_deg, width, height);
+    off.globe.relax_detail = false;
+    let started = Instant::now();
+    let mut first_frame_ms = f64::NAN;
+    let mut first_frame_holes = (0u32, 0u32);
+    let mut all_loaded_ms = None;
+    let mut frames = 0u32;
+    let mut last = None;
+    while started.elapsed() < Duration::from_secs(120) {
+        let report = off.globe.frame(&off.ctx.device, &off.ctx.queue, &view_b);
+        frames += 1;
+        if frames == 1 {
+            let image = off.draw_and_read()?;
+            first_frame_ms = started.elapsed().as_secs_f64() * 1e3;
+            first_frame_holes =
+                holes_inside(&image, &view_b, &off.globe.ellipsoid().grown(-16_000.0));
+        } else if !a.no_draw {
+            off.draw();
+        } else {
+            // Uploads still reach the GPU.
+            off.ctx.queue.submit([]);
+        }
+        let done = report.wanted == 0;
+        last = Some(report);
+        if done {
+            all_loaded_ms = Some(started.elapsed().as_secs_f64() * 1e3);
+            break;
+        }
+    }
+    let after = off.globe.layer().scheduler_stats();
+    let e = off.globe.ellipsoid();
+    let c = |cam: &CameraSpec| {
+        globus_geo::Cartographic::new(cam.lon_deg.to_radians(), cam.lat_deg.to_radians(), 0.0)
+    };
+    let last = last.context("no frame ran")?;
+    let out = json!({
+        "jump_km": e.great_circle_distance(c(&from), c(&to)) / 1e3,
+        "size": [width, height],
+        "first_frame_ms": first_frame_ms,
+        "first_frame_pixels_on_planet": first_frame_holes.0,
+        "first_frame_holes": first_frame_holes.1,
+        "all_loaded_ms": all_loaded_ms,
+        "frames": frames,
+        "tiles_drawn": last.draw.tiles,
+        "max_level": last.selection.max_level,
+        "tiles_requested": after.requested - before.requested,
+        "tiles_loaded": after.loaded - before.loaded,
+        "retries": after.retries - before.retries,
+        "tiles_failed": after.failed - before.failed,
+        "per_host": options.http.per_host,
+        "frames_drawn": !a.no_draw,
+        "adapter": off.ctx.adapter_description(),
+    });
+    println!("{out}");
+    Ok(())
+}
+
+/// Pixels whose centre ray hits `body`, and how many of those show no terrain.
+fn holes_inside(
+    img: &globus_render::RgbaImage,
+    view: &globus_geo::View,
+    body: &globus_geo::Ellipsoid,
+) -> (u32, u32) {
+    let (mut inside, mut holes) = (0, 0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(view.position, dir).is_some() {
+                inside += 1;
+                if img.pixels[((y * img.width + x) * 4 + 3) as usize] != 255 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    (inside, holes)
+}
+
+/// Resident memory of this process, MiB (Linux; NaN elsewhere).
+fn resident_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// The soak test: random flights between random views, in real time at 10 frames per second.
+fn bench_soak(
+    a: &BenchArgs,
+    options: &GlobeOptions,
+    seconds: f64,
+    width: u32,
+    height: u32,
+) -> anyhow::Result<()> {
+    let mut off = Offscreen::new(options, width, height)?;
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut random_pose = || {
+        let alt = (300f64.ln() + uniform() * (8.0e6f64.ln() - 300f64.ln())).exp();
+        CameraSpec {
+            lon_deg: uniform() * 360.0 - 180.0,
+            lat_deg: (uniform() * 2.0 - 1.0)
+                .asin()
+                .to_degrees()
+                .clamp(-80.0, 80.0),
+            alt_m: alt,
+            heading_deg: uniform() * 360.0,
+            pitch_deg: if alt > 500_000.0 {
+                -90.0
+            } else {
+                -90.0 + uniform() * 80.0
+            },
+            above_ground: true,
+        }
+    };
+    const LEG_S: f64 = 4.0;
+    let (mut from, mut to) = (random_pose(), random_pose());
+    let started = Instant::now();
+    let (mut leg_start, mut next_sample, mut frame) = (0.0, 0.0, 0u64);
+    let mut max_rss: f64 = 0.0;
+    loop {
+        let t = started.elapsed().as_secs_f64();
+        if t > seconds {
+            break;
+        }
+        if t - leg_start >= LEG_S {
+            from = to;
+            to = random_pose();
+            leg_start = t;
+        }
+        let f = ((t - leg_start) / LEG_S).clamp(0.0, 1.0);
+        let s = f * f * (3.0 - 2.0 * f);
+        let mix = |x: f64, y: f64| x + (y - x) * s;
+        let pose = CameraSpec {
+            lon_deg: mix(from.lon_deg, to.lon_deg),
+            lat_deg: mix(from.lat_deg, to.lat_deg),
+            alt_m: mix(from.alt_m.ln(), to.alt_m.ln()).exp(),
+            heading_deg: mix(from.heading_deg, to.heading_deg),
+            pitch_deg: mix(from.pitch_deg, to.pitch_deg),
+            above_ground: true,
+        };
+        let view = pose.view(&off.globe, a.globe.fov_deg, width, height);
+        let r = off.globe.frame(&off.ctx.device, &off.ctx.queue, &view);
+        off.draw();
+        frame += 1;
+        if t >= next_sample {
+            next_sample += 1.0;
+            let rss = resident_mib();
+            max_rss = max_rss.max(rss);
+            let st = off.globe.layer().scheduler_stats();
+            println!(
+                "{}",
+                json!({
+                    "t_s": t,
+                    "rss_mib": rss,
+                    "cache_mib": r.layer.cached_bytes as f64 / 1048576.0,
+                    "cache_budget_mib": options.cache_bytes as f64 / 1048576.0,
+                    "gpu_tiles": r.pool.resident,
+                    "gpu_capacity": r.pool.capacity,
+                    "loading": r.layer.loading,
+                    "loaded": st.loaded,
+                    "failed": st.failed,
+                    "retries": st.retries,
+                    "sse_bound_px": r.sse_bound_px,
+                    "frames": frame,
+                })
+            );
+        }
+        let ahead = frame as f64 / 10.0 - started.elapsed().as_secs_f64();
+        if ahead > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(ahead));
+        }
+    }
+    let st = off.globe.layer().scheduler_stats();
+    println!(
+        "{}",
+        json!({"summary": true, "seconds": seconds, "frames": frame, "max_rss_mib": max_rss,
+               "loaded": st.loaded, "failed": st.failed, "retries": st.retries,
+               "no_data": st.no_data, "stopped_in_flight": st.cancelled_in_flight})
+    );
     Ok(())
 }

@@ -227,7 +227,14 @@ impl TerrainLayer {
         if self.cache.is_over_budget() {
             self.scheduler.submit(&[]);
         } else {
-            self.scheduler.submit(wanted);
+            // The caller split its list before this update took in what arrived: tiles that
+            // just arrived must not be asked for again.
+            let missing: Vec<TileRequest> = wanted
+                .iter()
+                .filter(|r| !self.cache.contains(r.key) && !self.no_data.contains(&r.key))
+                .copied()
+                .collect();
+            self.scheduler.submit(&missing);
         }
         stats.loading = self.loading() as u32;
         stats.cached = self.cache.len() as u32;

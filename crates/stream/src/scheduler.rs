@@ -138,7 +138,8 @@ struct Queue {
     pending: Vec<(f64, TileKey)>,
     queued: FxHashSet<TileKey>,
     in_flight: FxHashMap<TileKey, Cancel>,
-    /// In flight, but finished and being delivered.
+    /// Finished and sent (or being sent), not yet collected by the consumer: neither to be
+    /// cancelled nor queued again.
     done: FxHashSet<TileKey>,
     /// Tiles that failed transiently: failures so far and when they may be tried again.
     backoff: FxHashMap<TileKey, (u32, Duration)>,
@@ -281,7 +282,10 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
         q.wanted.clear();
         for r in requests {
             q.wanted.insert(r.key, r.priority);
-            if q.in_flight.contains_key(&r.key) || !q.queued.insert(r.key) {
+            if q.in_flight.contains_key(&r.key)
+                || q.done.contains(&r.key)
+                || !q.queued.insert(r.key)
+            {
                 continue;
             }
             if !old.contains(&r.key) {
@@ -325,13 +329,24 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
                 out.push(m);
             }
         }
+        self.collected(out.iter().map(|m| m.0));
         out
+    }
+
+    /// The consumer has these outcomes: their tiles may be asked for again.
+    fn collected(&self, keys: impl Iterator<Item = TileKey>) {
+        let mut q = self.shared.lock();
+        for k in keys {
+            q.done.remove(&k);
+        }
     }
 
     /// Blocks until an outcome arrives or `timeout` passes (for offline rendering, which
     /// waits for loads on purpose).
     pub fn wait_one(&self, timeout: Duration) -> Option<(TileKey, Outcome<S::Tile>)> {
-        self.results.as_ref()?.recv_timeout(timeout).ok()
+        let m = self.results.as_ref()?.recv_timeout(timeout).ok()?;
+        self.collected(std::iter::once(m.0));
+        Some(m)
     }
 
     /// Tiles queued but not started (including those waiting out a backoff).
@@ -490,10 +505,7 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
             // Done: a submit that no longer lists it has nothing to cancel.
             shared.lock().done.insert(key);
             let sent = tx.send((key, outcome)).is_ok();
-            let mut q = shared.lock();
-            q.in_flight.remove(&key);
-            q.done.remove(&key);
-            drop(q);
+            shared.lock().in_flight.remove(&key);
             if !sent {
                 return;
             }
@@ -857,5 +869,27 @@ mod tests {
             .map(|k| k.level())
             .collect();
         assert_eq!(levels, vec![2, 4, 5, 6, 7]);
+    }
+
+    #[test]
+    fn a_delivered_tile_is_not_loaded_again_before_it_is_collected() {
+        let src = Arc::new(Recorder {
+            order: Mutex::new(Vec::new()),
+            gate: Mutex::new(true),
+            started: AtomicUsize::new(0),
+        });
+        let s = Scheduler::new(Arc::clone(&src), 2);
+        s.submit(&[req(3, 1.0)]);
+        eventually("loaded", || s.stats().loaded == 1);
+        // The consumer has not drained yet and still lists the tile: no second load.
+        for _ in 0..5 {
+            s.submit(&[req(3, 1.0)]);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert_eq!(s.stats().started, 1);
+        assert_eq!(s.drain().len(), 1);
+        // Collected: asking again is the consumer's decision and is honoured.
+        s.submit(&[req(3, 1.0)]);
+        eventually("loaded again", || s.stats().loaded == 2);
     }
 }
