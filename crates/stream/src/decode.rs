@@ -139,6 +139,80 @@ pub fn decode_elevation(
     })
 }
 
+/// Samples per side of the height grid a quantized-mesh tile is rasterised onto.
+/// (129: engine tiles read data four times finer than their 33-sample meshes.)
+pub const QUANTIZED_MESH_GRID: u32 = 129;
+
+/// Decodes a quantized-mesh-1.0 tile (gzip'd or not) and rasterises its triangles onto a
+/// `side` x `side` corner grid (sample `i` at `i / (side - 1)` of the tile, north row first),
+/// interpolating heights linearly inside each triangle, as the mesh draws them.
+pub fn decode_quantized_mesh(bytes: &[u8], side: u32) -> Result<HeightImage, String> {
+    use globus_terrain::quantized_mesh::QuantizedMesh;
+    let qm = QuantizedMesh::decode(bytes).map_err(|e| format!("quantized-mesh: {e}"))?;
+    if qm.triangle_count() == 0 {
+        return Err("quantized-mesh: no triangles".into());
+    }
+    let n = side.max(2) as usize;
+    let scale = (n - 1) as f64 / 32767.0;
+    // Grid coordinates: x east, y south.
+    let xy = |i: usize| {
+        (
+            f64::from(qm.u[i]) * scale,
+            (32767.0 - f64::from(qm.v[i])) * scale,
+        )
+    };
+    let mut heights = vec![f64::NAN; n * n];
+    for t in qm.indices.chunks_exact(3) {
+        let [a, b, c] = [t[0] as usize, t[1] as usize, t[2] as usize];
+        let (pa, pb, pc) = (xy(a), xy(b), xy(c));
+        let (ha, hb, hc) = (qm.height_m(a), qm.height_m(b), qm.height_m(c));
+        let det = (pb.1 - pc.1) * (pa.0 - pc.0) + (pc.0 - pb.0) * (pa.1 - pc.1);
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        let x0 = pa.0.min(pb.0).min(pc.0).floor().max(0.0) as usize;
+        let x1 = (pa.0.max(pb.0).max(pc.0).ceil() as usize).min(n - 1);
+        let y0 = pa.1.min(pb.1).min(pc.1).floor().max(0.0) as usize;
+        let y1 = (pa.1.max(pb.1).max(pc.1).ceil() as usize).min(n - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let (px, py) = (x as f64, y as f64);
+                let l1 = ((pb.1 - pc.1) * (px - pc.0) + (pc.0 - pb.0) * (py - pc.1)) / det;
+                let l2 = ((pc.1 - pa.1) * (px - pc.0) + (pa.0 - pc.0) * (py - pc.1)) / det;
+                let l3 = 1.0 - l1 - l2;
+                let eps = -1e-9;
+                if l1 >= eps && l2 >= eps && l3 >= eps {
+                    heights[y * n + x] = l1 * ha + l2 * hb + l3 * hc;
+                }
+            }
+        }
+    }
+    // Samples no triangle covered (a mesh with holes): the nearest covered sample in the row,
+    // else in the column, else the lowest height.
+    let lowest = f64::from(qm.header.min_height_m);
+    let mut filled = heights.clone();
+    for y in 0..n {
+        for x in 0..n {
+            if filled[y * n + x].is_nan() {
+                let row = (0..n)
+                    .filter(|&i| !heights[y * n + i].is_nan())
+                    .min_by_key(|&i| i.abs_diff(x))
+                    .map(|i| heights[y * n + i]);
+                let col = (0..n)
+                    .filter(|&j| !heights[j * n + x].is_nan())
+                    .min_by_key(|&j| j.abs_diff(y))
+                    .map(|j| heights[j * n + x]);
+                filled[y * n + x] = row.or(col).unwrap_or(lowest);
+            }
+        }
+    }
+    Ok(HeightImage {
+        width: n as u32,
+        height: n as u32,
+        heights_m: filled.into_iter().map(|h| h as f32).collect(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -197,5 +271,43 @@ mod tests {
             }
         }
         !c
+    }
+
+    #[test]
+    fn quantized_mesh_tiles_rasterise_to_the_planes_they_draw() {
+        use globus_terrain::quantized_mesh::QuantizedMesh;
+        // Two triangles over the tile: a plane rising 100 m from west to east and 50 m from
+        // south to north.
+        let plane = |u: u16, v: u16| 100.0 * f64::from(u) / 32767.0 + 50.0 * f64::from(v) / 32767.0;
+        let corners = [(0u16, 0u16), (32767, 0), (32767, 32767), (0, 32767)];
+        let mut qm = QuantizedMesh::default();
+        qm.header.min_height_m = 0.0;
+        qm.header.max_height_m = 150.0;
+        for &(u, v) in &corners {
+            qm.u.push(u);
+            qm.v.push(v);
+            qm.height
+                .push((plane(u, v) / 150.0 * 32767.0).round() as u16);
+        }
+        qm.indices = vec![0, 1, 2, 0, 2, 3];
+        qm.west = vec![0, 3];
+        qm.south = vec![0, 1];
+        qm.east = vec![1, 2];
+        qm.north = vec![3, 2];
+        let img = decode_quantized_mesh(&qm.encode(true), 5).expect("decode");
+        assert_eq!((img.width, img.height), (5, 5));
+        for y in 0..5u32 {
+            for x in 0..5u32 {
+                let u = (f64::from(x) / 4.0 * 32767.0) as u16;
+                let v = ((1.0 - f64::from(y) / 4.0) * 32767.0) as u16;
+                let got = f64::from(img.heights_m[(y * 5 + x) as usize]);
+                assert!(
+                    (got - plane(u, v)).abs() < 0.05,
+                    "({x},{y}): {got} vs {}",
+                    plane(u, v)
+                );
+            }
+        }
+        assert!(decode_quantized_mesh(b"not a mesh at all", 5).is_err());
     }
 }

@@ -22,6 +22,12 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use crate::scheduler::Outcome;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
 
+/// A tile that failed for good is asked for again after this long, doubling with each
+/// failure up to [`FAILED_RETRY_MAX`].
+const FAILED_RETRY_AFTER: Duration = Duration::from_secs(30);
+/// Longest wait before asking for a failed tile again.
+const FAILED_RETRY_MAX: Duration = Duration::from_secs(600);
+
 /// Most "no data here" answers remembered (16 bytes each).
 const MAX_NO_DATA_KEYS: usize = 1 << 20;
 
@@ -102,6 +108,8 @@ pub struct TerrainLayer {
     no_data: FxHashSet<TileKey>,
     /// Load and draw bookkeeping, when a benchmark asked for it.
     usage: Option<Usage>,
+    /// Tiles that failed: when they may be asked for again, and how often they failed.
+    failures: FxHashMap<TileKey, (Instant, u32)>,
     ellipsoid: Ellipsoid,
     occluder: Ellipsoid,
     height_range_m: (f64, f64),
@@ -122,6 +130,7 @@ impl TerrainLayer {
             nodes: FxHashMap::default(),
             no_data: FxHashSet::default(),
             usage: None,
+            failures: FxHashMap::default(),
             ellipsoid,
             occluder,
             height_range_m,
@@ -246,6 +255,7 @@ impl TerrainLayer {
     fn accept(&mut self, key: TileKey, outcome: Outcome<TerrainData>) {
         let state = match outcome {
             Outcome::Loaded(data) => {
+                self.failures.remove(&key);
                 if let Some(u) = &mut self.usage {
                     u.stats.loaded += 1;
                     if self.cache.contains(key) {
@@ -293,6 +303,15 @@ impl TerrainLayer {
             }
             Outcome::Failed(e) => {
                 eprintln!("globus: {e}");
+                let failures = self.failures.get(&key).map_or(0, |f| f.1) + 1;
+                let wait = FAILED_RETRY_AFTER
+                    .saturating_mul(1 << (failures - 1).min(5))
+                    .min(FAILED_RETRY_MAX);
+                if self.failures.len() >= MAX_NO_DATA_KEYS {
+                    let now = Instant::now();
+                    self.failures.retain(|_, f| f.0 > now);
+                }
+                self.failures.insert(key, (Instant::now() + wait, failures));
                 TileState::Failed
             }
         };
@@ -392,6 +411,15 @@ impl TileOracle for TerrainLayer {
         let state = match node.state {
             TileState::Loaded if !node.drawable => TileState::Unloaded,
             TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
+            // A failed tile is asked for again after its cool-down (a server may recover).
+            TileState::Failed
+                if self
+                    .failures
+                    .get(&key)
+                    .is_some_and(|f| Instant::now() >= f.0) =>
+            {
+                TileState::Unloaded
+            }
             s => s,
         };
         TileInfo {
@@ -430,5 +458,38 @@ mod tests {
             layer.tile(TileKey::new(4, 11, 4)).state,
             TileState::Unloaded
         );
+    }
+
+    #[test]
+    fn failed_tiles_are_asked_for_again_after_a_cool_down() {
+        let source = Arc::new(ProceduralSource::new(24, 3));
+        let mut layer = TerrainLayer::new(
+            source,
+            TerrainLayerOptions {
+                cache_bytes: 1 << 30,
+                workers: 1,
+            },
+        );
+        let key = TileKey::new(2, 1, 1);
+        let failure = crate::SourceError::Failed {
+            key,
+            source_name: "test".into(),
+            message: "HTTP 403".into(),
+        };
+        layer.accept(key, Outcome::Failed(failure.clone()));
+        assert_eq!(layer.tile(key).state, TileState::Failed);
+        let (retry_at, count) = layer.failures[&key];
+        assert_eq!(count, 1);
+        assert!(retry_at >= Instant::now() + FAILED_RETRY_AFTER - Duration::from_secs(1));
+        // Once the cool-down has passed, selection sees it as not loaded (and asks again).
+        layer
+            .failures
+            .insert(key, (Instant::now() - Duration::from_millis(1), 1));
+        assert_eq!(layer.tile(key).state, TileState::Unloaded);
+        // A second failure waits twice as long.
+        layer.accept(key, Outcome::Failed(failure));
+        let (retry_at, count) = layer.failures[&key];
+        assert_eq!(count, 2);
+        assert!(retry_at >= Instant::now() + 2 * FAILED_RETRY_AFTER - Duration::from_secs(1));
     }
 }

@@ -25,7 +25,10 @@ use globus_terrain::encoding::ElevationEncoding;
 use globus_tiling::{GeoRect, TilingScheme};
 use serde::Deserialize;
 
-use crate::decode::{DecodeLimits, HeightImage, Rgba, decode_elevation, decode_image};
+use crate::decode::{
+    DecodeLimits, HeightImage, QUANTIZED_MESH_GRID, Rgba, decode_elevation, decode_image,
+    decode_quantized_mesh,
+};
 use crate::fetch::pmtiles::{FileRange, HttpRange};
 use crate::fetch::{
     CachedFetch, Cancel, DirectoryFetch, DiskCacheOptions, Fetch, FetchError, HttpClient,
@@ -40,7 +43,8 @@ pub struct SourceSpec {
     /// A path, or an `http(s)://` URL (a template, a served directory, a `.pmtiles` file or a
     /// WMS endpoint).
     pub url: String,
-    /// Elevation encoding: `terrarium`, `mapbox` or `centimetre`.
+    /// Elevation encoding: `terrarium`, `mapbox`, `centimetre` or `quantized-mesh` (also
+    /// implied by a URL ending in `.terrain`).
     pub encoding: Option<String>,
     /// `geographic` or `webmercator`.
     pub scheme: Option<String>,
@@ -179,14 +183,27 @@ fn meta_from_json(j: &serde_json::Value) -> Meta {
     }
 }
 
+/// How an elevation layer's tiles encode heights.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ElevationFormat {
+    /// RGB-encoded images (Terrarium, Terrain-RGB, centimetre).
+    Rgb(ElevationEncoding),
+    /// Cesium quantized-mesh-1.0 (`.terrain`), rasterised onto a
+    /// [`QUANTIZED_MESH_GRID`]-sample grid.
+    QuantizedMesh,
+}
+
+/// The `encoding` value that selects quantized-mesh.
+pub const QUANTIZED_MESH: &str = "quantized-mesh";
+
 /// An opened layer: where its bytes come from and how they are laid out.
 pub struct OpenedLayer {
     /// The bytes.
     pub fetch: Arc<dyn Fetch>,
     /// The layout.
     pub spec: PyramidSpec,
-    /// The elevation encoding (elevation layers).
-    pub encoding: Option<ElevationEncoding>,
+    /// The elevation format (elevation layers).
+    pub encoding: Option<ElevationFormat>,
 }
 
 /// Opens the layer `spec` names (reading local metadata, or fetching a served directory's
@@ -206,6 +223,18 @@ pub fn open_layer(
     };
     let url = spec.url.as_str();
     let is_http = url.starts_with("http://") || url.starts_with("https://");
+    // Quantized-mesh pyramids are geographic with corner-registered tiles by nature.
+    let quantized_mesh = kind == LayerKind::Elevation
+        && (spec.encoding.as_deref() == Some(QUANTIZED_MESH)
+            || url
+                .split(['?', '#'])
+                .next()
+                .is_some_and(|p| p.ends_with(".terrain")));
+    let template_scheme = if quantized_mesh {
+        TilingScheme::Geographic
+    } else {
+        TilingScheme::WebMercator
+    };
     let (fetch, meta): (Arc<dyn Fetch>, Meta) = if let Some(layers) = &spec.wms_layers {
         let version = match spec.wms_version.as_deref().unwrap_or("1.3.0") {
             "1.1.1" => WmsVersion::V1_1_1,
@@ -258,7 +287,7 @@ pub fn open_layer(
             .flatten()
             .map(String::as_str)
             .collect();
-        let scheme = parse_scheme(spec.scheme.as_deref(), TilingScheme::WebMercator)?;
+        let scheme = parse_scheme(spec.scheme.as_deref(), template_scheme)?;
         (
             cached(Box::new(TemplateFetch::new(
                 Arc::clone(client),
@@ -318,9 +347,13 @@ pub fn open_layer(
         )
     };
 
+    let quantized_mesh = quantized_mesh
+        || (kind == LayerKind::Elevation
+            && spec.encoding.is_none()
+            && meta.encoding.as_deref() == Some(QUANTIZED_MESH));
     let scheme = parse_scheme(
         spec.scheme.as_deref(),
-        meta.scheme.unwrap_or(TilingScheme::WebMercator),
+        meta.scheme.unwrap_or(template_scheme),
     )?;
     let min_level = spec.minzoom.or(meta.min).unwrap_or(0);
     let default_max = match kind {
@@ -333,16 +366,20 @@ pub fn open_layer(
             "{url}: minzoom {min_level} is above maxzoom {max_level}"
         ));
     }
-    let tile_size = spec.tile_size.or(meta.tile_size).unwrap_or(256);
-    if !(2..=4096).contains(&tile_size) {
-        return Err(format!("{url}: tile size {tile_size}"));
-    }
-    let grid = match spec.grid.as_deref() {
+    let mut tile_size = spec.tile_size.or(meta.tile_size).unwrap_or(256);
+    let mut grid = match spec.grid.as_deref() {
         Some("corners") => SampleGrid::Corners,
         Some("cells") => SampleGrid::Cells,
         Some(g) => return Err(format!("{url}: grid {g:?} (use corners or cells)")),
         None => meta.grid.unwrap_or(SampleGrid::Cells),
     };
+    if quantized_mesh {
+        tile_size = QUANTIZED_MESH_GRID;
+        grid = SampleGrid::Corners;
+    }
+    if !(2..=4096).contains(&tile_size) {
+        return Err(format!("{url}: tile size {tile_size}"));
+    }
     let bounds = spec
         .bounds
         .or(meta.bounds)
@@ -351,15 +388,16 @@ pub fn open_layer(
         });
     let encoding = match kind {
         LayerKind::Imagery => None,
+        LayerKind::Elevation if quantized_mesh => Some(ElevationFormat::QuantizedMesh),
         LayerKind::Elevation => {
             let name = spec.encoding.clone().or(meta.encoding).ok_or_else(|| {
-                format!("{url}: which elevation encoding? add #encoding=terrarium (or mapbox, centimetre)")
+                format!("{url}: which elevation encoding? add #encoding=terrarium (or mapbox, centimetre, quantized-mesh)")
             })?;
-            Some(ElevationEncoding::parse(&name).ok_or_else(|| {
+            Some(ElevationFormat::Rgb(ElevationEncoding::parse(&name).ok_or_else(|| {
                 format!(
-                    "{url}: unknown elevation encoding {name:?} (terrarium, mapbox, centimetre)"
+                    "{url}: unknown elevation encoding {name:?} (terrarium, mapbox, centimetre, quantized-mesh)"
                 )
-            })?)
+            })?))
         }
     };
     Ok(OpenedLayer {
@@ -443,7 +481,12 @@ pub fn elevation_pyramid(
     Ok(Arc::new(RasterPyramid::new(
         layer.fetch,
         layer.spec,
-        Box::new(move |b| decode_elevation(b, encoding, limits)),
+        match encoding {
+            ElevationFormat::Rgb(e) => Box::new(move |b| decode_elevation(b, e, limits)),
+            ElevationFormat::QuantizedMesh => {
+                Box::new(|b| decode_quantized_mesh(b, QUANTIZED_MESH_GRID))
+            }
+        },
         LAYER_CACHE_TILES,
     )))
 }

@@ -41,14 +41,22 @@ impl PyramidSpec {
     /// The level whose sample spacing is closest to (not coarser than) `spacing_rad` of
     /// latitude at the equator, clamped to the pyramid's levels.
     pub fn level_for_spacing(&self, spacing_rad: f64) -> u8 {
+        let level = self.ideal_level(spacing_rad).clamp(0, 30) as u8;
+        level.clamp(self.min_level, self.max_level)
+    }
+
+    /// The same level before clamping to the pyramid's (may be negative or beyond them).
+    pub fn ideal_level(&self, spacing_rad: f64) -> i32 {
         let span0 = match self.scheme {
             TilingScheme::Geographic => PI,
             TilingScheme::WebMercator => 2.0 * PI,
         };
         let per_tile =
             f64::from(self.tile_size.max(2) - u32::from(self.grid == SampleGrid::Corners));
-        let level = (span0 / per_tile / spacing_rad).log2().ceil();
-        (level.max(0.0) as u8).clamp(self.min_level, self.max_level)
+        (span0 / per_tile / spacing_rad)
+            .log2()
+            .ceil()
+            .clamp(-64.0, 64.0) as i32
     }
 
     /// The tile and its fractional sample coordinates (x east, y south, in samples) holding

@@ -200,8 +200,13 @@ impl RasterTerrainSource {
             if !intersects(rect, &s.bounds) {
                 continue;
             }
-            detailed |= finest_spacing(p) <= mesh_spacing * DETAIL_TOLERANCE;
             let level = s.level_for_spacing(mesh_spacing / f64::from(OVERSAMPLE));
+            // A layer whose shallowest tiles are far finer than this tile needs would take
+            // dozens of requests per tile: leave it to deeper tiles.
+            if s.ideal_level(mesh_spacing / f64::from(OVERSAMPLE)) + 1 < i32::from(s.min_level) {
+                continue;
+            }
+            detailed |= finest_spacing(p) <= mesh_spacing * DETAIL_TOLERANCE;
             layers.push((Touched::new(p), level));
         }
         let texel = rect.height() / f64::from(COLOUR_SIZE);

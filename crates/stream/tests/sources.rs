@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use globus_geo::Ellipsoid;
 use globus_stream::decode::DecodeLimits;
 use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
-use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, open_layer};
+use globus_stream::open::{ElevationFormat, LayerKind, SourceSpec, elevation_pyramid, open_layer};
 use globus_stream::pyramid::SampleGrid;
 use globus_stream::{
     Outcome, RasterTerrainSource, RetryPolicy, Scheduler, SchedulerOptions, SystemClock,
@@ -108,7 +108,11 @@ fn directory_mbtiles_pmtiles_and_pmtiles_over_http_serve_the_same_tiles() {
         assert_eq!((l.spec.min_level, l.spec.max_level), (0, MAX_LEVEL), "{s}");
         assert_eq!(l.spec.grid, SampleGrid::Corners, "{s}");
         assert_eq!(l.spec.tile_size, 256, "{s}");
-        assert_eq!(l.encoding, Some(ElevationEncoding::Terrarium), "{s}");
+        assert_eq!(
+            l.encoding,
+            Some(ElevationFormat::Rgb(ElevationEncoding::Terrarium)),
+            "{s}"
+        );
         let b = l.spec.bounds.to_degrees();
         assert!(
             (b[0] - 11.0).abs() < 0.01 && (b[3] - 58.0).abs() < 0.01,
