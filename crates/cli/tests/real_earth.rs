@@ -171,7 +171,6 @@ fn quantized_mesh_terrain_matches_the_pyramid_it_was_meshed_from() {
     use globus_stream::decode::DecodeLimits;
     use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
     use globus_stream::open::{LayerKind, elevation_pyramid, open_layer};
-    use globus_tiling::TileKey;
     use std::sync::Arc;
 
     let root = common::scratch("real_earth", "quantized_mesh");
