@@ -636,6 +636,12 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             "loaded_never_drawn_fraction".into(),
             json!(u.loaded_never_drawn as f64 / u.loaded.max(1) as f64),
         );
+        summary.insert("fetched".into(), json!(u.fetched));
+        summary.insert("fetched_never_drawn".into(), json!(u.fetched_never_drawn));
+        summary.insert(
+            "fetched_never_drawn_fraction".into(),
+            json!(u.fetched_never_drawn as f64 / u.fetched.max(1) as f64),
+        );
         summary.insert(
             "loaded_again_while_cached".into(),
             json!(u.loaded_again_while_cached),

@@ -74,6 +74,11 @@ pub struct UsageStats {
     pub loaded: u64,
     /// Distinct loaded tiles that were never in a draw list.
     pub loaded_never_drawn: u64,
+    /// Tiles that arrived loaded from fetched data (not generated here).
+    pub fetched: u64,
+    /// Distinct tiles loaded from fetched data that were never in a draw list: requests
+    /// that bought nothing visible.
+    pub fetched_never_drawn: u64,
     /// Loads of a tile that was in the cache at the time (should be none).
     pub loaded_again_while_cached: u64,
     /// Loads of a tile loaded before and evicted since.
@@ -84,6 +89,7 @@ pub struct UsageStats {
 struct Usage {
     drawn: FxHashSet<TileKey>,
     loaded: FxHashSet<TileKey>,
+    fetched: FxHashSet<TileKey>,
     stats: UsageStats,
 }
 
@@ -187,6 +193,7 @@ impl TerrainLayer {
     pub fn usage(&self) -> Option<UsageStats> {
         self.usage.as_ref().map(|u| UsageStats {
             loaded_never_drawn: u.loaded.difference(&u.drawn).count() as u64,
+            fetched_never_drawn: u.fetched.difference(&u.drawn).count() as u64,
             ..u.stats
         })
     }
@@ -258,6 +265,10 @@ impl TerrainLayer {
                 self.failures.remove(&key);
                 if let Some(u) = &mut self.usage {
                     u.stats.loaded += 1;
+                    if !data.generated {
+                        u.stats.fetched += 1;
+                        u.fetched.insert(key);
+                    }
                     if self.cache.contains(key) {
                         u.stats.loaded_again_while_cached += 1;
                     } else if !u.loaded.insert(key) {

@@ -38,12 +38,15 @@ impl ProceduralSource {
 
     /// Builds everything the engine needs from a generated tile.
     pub fn prepare(&self, tile: TerrainTile) -> TerrainData {
-        TerrainData::build(
-            tile,
-            self.planet.ellipsoid(),
-            &self.occluder,
-            &self.mesh_options,
-        )
+        TerrainData {
+            generated: true,
+            ..TerrainData::build(
+                tile,
+                self.planet.ellipsoid(),
+                &self.occluder,
+                &self.mesh_options,
+            )
+        }
     }
 
     /// Cuts meshes with `options` instead of the default.

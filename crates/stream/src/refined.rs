@@ -143,12 +143,15 @@ impl TileSource for RefinedSource {
                 source_name: self.name.clone(),
                 message: e.to_string(),
             })?;
-        Ok(Some(TerrainData::build(
-            tile,
-            self.inner.ellipsoid(),
-            self.inner.occluder(),
-            &self.mesh_options,
-        )))
+        Ok(Some(TerrainData {
+            generated: true,
+            ..TerrainData::build(
+                tile,
+                self.inner.ellipsoid(),
+                self.inner.occluder(),
+                &self.mesh_options,
+            )
+        }))
     }
 
     fn byte_size(&self, tile: &TerrainData) -> usize {

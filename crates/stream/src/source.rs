@@ -87,6 +87,9 @@ pub struct TerrainData {
     /// Bounds for children NW, NE, SW, SE, from this tile's heights in each quadrant widened
     /// by this tile's geometric error.
     pub child_bounds: [TileBounds; 4],
+    /// Made here (procedural planet, refinement below the data) rather than from data
+    /// fetched for it: no request was sent for this tile.
+    pub generated: bool,
 }
 
 impl TerrainData {
@@ -106,6 +109,7 @@ impl TerrainData {
             tile,
             mesh,
             child_bounds,
+            generated: false,
         }
     }
 
