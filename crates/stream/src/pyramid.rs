@@ -113,8 +113,12 @@ impl Samples for crate::decode::Rgba {
     }
 }
 
-/// Decoded tiles (or "no tile") with their last-use stamps, and the stamp clock.
-type TileCache<T> = (FxHashMap<TileKey, (Option<Arc<T>>, u64)>, u64);
+/// Decoded tiles ("no tile", or why the tile is broken) with their last-use stamps, and the
+/// stamp clock.
+type TileCache<T> = (
+    FxHashMap<TileKey, (Result<Option<Arc<T>>, String>, u64)>,
+    u64,
+);
 
 type Decoder<T> = dyn Fn(&[u8]) -> Result<T, String> + Send + Sync;
 
@@ -156,7 +160,9 @@ impl<T: Samples> RasterPyramid<T> {
         self.fetch.name()
     }
 
-    /// A decoded tile, `None` where the pyramid has none.
+    /// A decoded tile, `None` where the pyramid has none. A tile whose bytes do not decode is
+    /// a permanent error, remembered (while it stays in the cache) so it is not fetched again
+    /// for every engine tile that needs it.
     pub fn tile(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
         {
             let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
@@ -164,25 +170,17 @@ impl<T: Samples> RasterPyramid<T> {
             let now = c.1;
             if let Some(e) = c.0.get_mut(&key) {
                 e.1 = now;
-                return Ok(e.0.clone());
+                return e.0.clone().map_err(FetchError::Permanent);
             }
         }
-        let tile = match self.fetch.fetch(key, cancel)? {
-            None => None,
-            Some(f) => Some(Arc::new((self.decode)(&f.bytes).map_err(|m| {
-                FetchError::Permanent(format!("{}: {m}", self.fetch.locate(key)))
-            })?)),
+        let entry = match self.fetch.fetch(key, cancel) {
+            Ok(None) => Ok(None),
+            Ok(Some(f)) => self
+                .decode_checked(key, &f.bytes)
+                .map(|t| Some(Arc::new(t))),
+            Err(FetchError::Permanent(m)) => Err(m),
+            Err(e) => return Err(e),
         };
-        if let Some(t) = &tile {
-            let (w, h) = t.size();
-            if w != self.spec.tile_size || h != self.spec.tile_size {
-                return Err(FetchError::Permanent(format!(
-                    "{}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
-                    self.fetch.locate(key),
-                    self.spec.tile_size
-                )));
-            }
-        }
         let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
         c.1 += 1;
         let now = c.1;
@@ -193,8 +191,21 @@ impl<T: Samples> RasterPyramid<T> {
             let cut = stamps[stamps.len() / 2];
             c.0.retain(|_, e| e.1 > cut);
         }
-        c.0.insert(key, (tile.clone(), now));
-        Ok(tile)
+        c.0.insert(key, (entry.clone(), now));
+        entry.map_err(FetchError::Permanent)
+    }
+
+    fn decode_checked(&self, key: TileKey, bytes: &[u8]) -> Result<T, String> {
+        let t = (self.decode)(bytes).map_err(|m| format!("{}: {m}", self.fetch.locate(key)))?;
+        let (w, h) = t.size();
+        if w != self.spec.tile_size || h != self.spec.tile_size {
+            return Err(format!(
+                "{}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
+                self.fetch.locate(key),
+                self.spec.tile_size
+            ));
+        }
+        Ok(t)
     }
 }
 

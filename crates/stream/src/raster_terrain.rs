@@ -120,6 +120,21 @@ impl<'a, T: Samples> Touched<'a, T> {
         self.tiles.insert(key, t.clone());
         Ok(t)
     }
+
+    /// Like [`Touched::get`], but a broken tile counts as missing (and is not asked again).
+    fn get_or_missing(
+        &mut self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<Arc<T>>, FetchError> {
+        match self.get(key, cancel) {
+            Err(FetchError::Permanent(_)) => {
+                self.tiles.insert(key, None);
+                Ok(None)
+            }
+            other => other,
+        }
+    }
 }
 
 impl RasterTerrainSource {
@@ -140,12 +155,18 @@ impl RasterTerrainSource {
         let mesh0 = std::f64::consts::PI / f64::from(MESH_SEGMENTS);
         let texel0 = std::f64::consts::PI / f64::from(COLOUR_SIZE);
         let deepest = |spacing: f64, unit: f64| (unit / spacing).log2().add(0.015).floor().max(0.0);
-        let max_level = elevation
-            .iter()
-            .map(|p| deepest(finest_spacing(p), mesh0))
-            .chain(imagery.iter().map(|p| deepest(finest_spacing(p), texel0)))
-            .fold(0.0, f64::max)
-            .min(f64::from(TileKey::MAX_LEVEL)) as u8;
+        let max_level = if elevation.is_empty() {
+            imagery
+                .iter()
+                .map(|p| deepest(finest_spacing(p), texel0))
+                .fold(0.0, f64::max)
+        } else {
+            elevation
+                .iter()
+                .map(|p| deepest(finest_spacing(p), mesh0))
+                .fold(0.0, f64::max)
+        }
+        .min(f64::from(TileKey::MAX_LEVEL)) as u8;
         let names: Vec<&str> = elevation
             .iter()
             .map(|p| p.name())
@@ -183,6 +204,14 @@ impl RasterTerrainSource {
         }
     }
 
+    /// Whether some imagery layer has detail at the texel size of a tile over `rect`.
+    fn imagery_detailed(&self, rect: &GeoRect) -> bool {
+        let texel = rect.height() / f64::from(COLOUR_SIZE);
+        self.imagery.iter().any(|p| {
+            intersects(rect, &p.spec().bounds) && finest_spacing(p) <= texel * DETAIL_TOLERANCE
+        })
+    }
+
     /// Heights of the 4x oversampled grid (and the mesh grid inside it), or `None` if no
     /// layer holds data finer than this tile's mesh.
     fn heights(
@@ -209,10 +238,12 @@ impl RasterTerrainSource {
             detailed |= finest_spacing(p) <= mesh_spacing * DETAIL_TOLERANCE;
             layers.push((Touched::new(p), level));
         }
-        let texel = rect.height() / f64::from(COLOUR_SIZE);
-        detailed |= self.imagery.iter().any(|p| {
-            intersects(rect, &p.spec().bounds) && finest_spacing(p) <= texel * DETAIL_TOLERANCE
-        });
+        // Without elevation layers (imagery on the bare ellipsoid) imagery decides how deep
+        // tiles go; with them, elevation does, and deeper imagery reaches refined tiles
+        // through `imagery_colour`.
+        if self.elevation.is_empty() {
+            detailed = self.imagery_detailed(rect);
+        }
         if !detailed && key.level() > 0 {
             return Ok(None);
         }
@@ -256,7 +287,7 @@ impl RasterTerrainSource {
         }
         // Every layer answered "no tile here" (404, or a hole in an archive): no data, so
         // the ancestor stays (or refinement takes over); the roots always exist.
-        if !any_data && key.level() > 0 {
+        if !any_data && !self.elevation.is_empty() && key.level() > 0 {
             return Ok(None);
         }
         Ok(Some(out))
@@ -271,18 +302,16 @@ impl RasterTerrainSource {
         let size = COLOUR_SIZE as usize;
         let texel = rect.height() / f64::from(COLOUR_SIZE);
         let mut px = vec![0u8; size * size * 4];
-        if self.imagery.is_empty() {
-            for ty in 0..size {
-                for tx in 0..size {
-                    let x = (tx as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
-                    let y = (ty as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
-                    let c = tint(mesh_height_at(heights, x, y));
-                    px[(ty * size + tx) * 4..][..4].copy_from_slice(&c);
-                }
-            }
-            return Ok(ColourImage::with_mips(COLOUR_SIZE, px));
-        }
+        // Heights tinted underneath: what shows where no imagery layer covers.
         let mut acc = vec![[0f64; 3]; size * size];
+        for ty in 0..size {
+            for tx in 0..size {
+                let x = (tx as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
+                let y = (ty as f64 + 0.5) / size as f64 * f64::from(MESH_SEGMENTS);
+                let c = tint(mesh_height_at(heights, x, y));
+                acc[ty * size + tx] = [f64::from(c[0]), f64::from(c[1]), f64::from(c[2])];
+            }
+        }
         for p in &self.imagery {
             let spec = *p.spec();
             if !intersects(rect, &spec.bounds) {
@@ -290,6 +319,7 @@ impl RasterTerrainSource {
             }
             let level = spec.level_for_spacing(texel);
             let mut touched = Touched::new(p);
+            let cap = polar_caps(p, &mut touched, cancel)?;
             for ty in 0..size {
                 for tx in 0..size {
                     let (lon, lat) = rect.lon_lat_at(
@@ -299,23 +329,15 @@ impl RasterTerrainSource {
                     if !inside(&spec.bounds, lon, lat) {
                         continue;
                     }
-                    let Some((k, x, y)) = spec.locate(lon, lat, level) else {
+                    let Some(c) = sample_imagery(&mut touched, level, lon, lat, cap, cancel)?
+                    else {
                         continue;
                     };
-                    let Some(t) = touched.get(k, cancel)? else {
-                        continue;
-                    };
-                    let ch = |c: usize| {
-                        bilinear(x, y, t.width, t.height, |a, b| {
-                            let p = t.at(a, b);
-                            f64::from(p[c]) * f64::from(p[3]) / 255.0
-                        })
-                    };
-                    let alpha = ch(3) / 255.0;
+                    let alpha = c[3] / 255.0;
                     let a = &mut acc[ty * size + tx];
-                    for (c, v) in a.iter_mut().enumerate() {
+                    for (k, v) in a.iter_mut().enumerate() {
                         // Premultiplied "over".
-                        *v = ch(c) + *v * (1.0 - alpha);
+                        *v = c[k] + *v * (1.0 - alpha);
                     }
                 }
             }
@@ -389,6 +411,110 @@ impl RasterTerrainSource {
     }
 }
 
+/// Latitude (radians) beyond which Web Mercator imagery has nothing.
+fn mercator_limit_rad() -> f64 {
+    globus_tiling::WEB_MERCATOR_MAX_LAT_DEG.to_radians()
+}
+
+/// Over this many degrees of latitude past the Web Mercator limit, the last row of imagery
+/// fades into the polar cap colour.
+const CAP_BLEND_DEG: f64 = 1.0;
+
+/// The colour (premultiplied RGBA, 0..255) of the north and south polar caps of a Web Mercator
+/// layer: the mean of its shallowest tiles' top and bottom rows, so the poles the projection
+/// cannot reach are filled with the colour the imagery has at its edge (ice where it shows
+/// ice), without streaks. `None` for geographic layers, which reach the poles.
+fn polar_caps(
+    p: &RasterPyramid<Rgba>,
+    touched: &mut Touched<'_, Rgba>,
+    cancel: &Cancel,
+) -> Result<Option<[[f64; 4]; 2]>, FetchError> {
+    let spec = *p.spec();
+    if spec.scheme != TilingScheme::WebMercator {
+        return Ok(None);
+    }
+    let level = spec.min_level;
+    let n = spec.scheme.tiles_x(level) as u32;
+    let rows = spec.scheme.tiles_y(level) as u32;
+    let mut caps = [[0.0; 4]; 2];
+    for (cap, (ty, row_of)) in caps.iter_mut().zip([(0u32, 0u32), (rows - 1, u32::MAX)]) {
+        let mut count = 0.0;
+        for tx in 0..n {
+            let Some(key) = spec.scheme.key(level, tx, ty) else {
+                continue;
+            };
+            let t = match touched.get_or_missing(key, cancel) {
+                Ok(Some(t)) => t,
+                Ok(None) | Err(FetchError::Permanent(_)) => continue,
+                Err(e) => return Err(e),
+            };
+            let y = if row_of == 0 { 0 } else { t.height - 1 };
+            for x in 0..t.width {
+                let px = t.at(x, y);
+                let a = f64::from(px[3]);
+                for k in 0..3 {
+                    cap[k] += f64::from(px[k]) * a / 255.0;
+                }
+                cap[3] += a;
+                count += 1.0;
+            }
+        }
+        if count > 0.0 {
+            cap.iter_mut().for_each(|v| *v /= count);
+        }
+    }
+    Ok(Some(caps))
+}
+
+/// Premultiplied RGBA (0..255) of an imagery layer at a point: from its tile at `level`, or
+/// where that tile is missing or broken, from the nearest ancestor that has one (cropped and
+/// scaled: the same point sampled at a coarser level); past the Web Mercator limit, the
+/// polar cap. `None` where the layer has nothing at all.
+fn sample_imagery(
+    touched: &mut Touched<'_, Rgba>,
+    level: u8,
+    lon: f64,
+    lat: f64,
+    caps: Option<[[f64; 4]; 2]>,
+    cancel: &Cancel,
+) -> Result<Option<[f64; 4]>, FetchError> {
+    let spec = *touched.pyramid.spec();
+    let mut found = None;
+    let mut l = level;
+    loop {
+        if let Some((k, x, y)) = spec.locate(lon, lat, l) {
+            match touched.get_or_missing(k, cancel) {
+                Ok(Some(t)) => {
+                    let alpha = bilinear(x, y, t.width, t.height, |a, b| f64::from(t.at(a, b)[3]));
+                    let ch = |c: usize| {
+                        bilinear(x, y, t.width, t.height, |a, b| {
+                            let p = t.at(a, b);
+                            f64::from(p[c]) * f64::from(p[3]) / 255.0
+                        })
+                    };
+                    found = Some([ch(0), ch(1), ch(2), alpha]);
+                    break;
+                }
+                Ok(None) | Err(FetchError::Permanent(_)) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if l <= spec.min_level {
+            break;
+        }
+        l -= 1;
+    }
+    let (Some(caps), true) = (caps, lat.abs() > mercator_limit_rad()) else {
+        return Ok(found);
+    };
+    let cap = if lat > 0.0 { caps[0] } else { caps[1] };
+    let t = ((lat.abs() - mercator_limit_rad()) / CAP_BLEND_DEG.to_radians()).clamp(0.0, 1.0);
+    Ok(Some(match found {
+        Some(f) => [0, 1, 2, 3].map(|k| f[k] + (cap[k] - f[k]) * t),
+        None => cap,
+    }))
+}
+
 /// A hypsometric tint for terrain without imagery: sea blue, lowland green, brown, rock grey,
 /// snow above 4500 m.
 fn tint(h: f64) -> [u8; 4] {
@@ -441,6 +567,22 @@ impl TileSource for RasterTerrainSource {
 }
 
 impl TerrainSource for RasterTerrainSource {
+    fn imagery_colour(
+        &self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<ColourImage>, SourceError> {
+        let rect = TilingScheme::Geographic.rect(key);
+        if self.imagery.is_empty() || !self.imagery_detailed(&rect) {
+            return Ok(None);
+        }
+        // Heights only tint where no imagery covers; imagery covers here.
+        let flat = vec![0f32; HEIGHT_GRID_SIDE * HEIGHT_GRID_SIDE];
+        self.colour(&rect, &flat, cancel)
+            .map(Some)
+            .map_err(|e| self.fail(key, e))
+    }
+
     fn ellipsoid(&self) -> &Ellipsoid {
         &self.ellipsoid
     }

@@ -135,7 +135,7 @@ impl TileSource for RefinedSource {
         let Some(base) = self.base_for(key, cancel)? else {
             return Ok(None);
         };
-        let tile = self
+        let mut tile = self
             .refiner
             .refine(&base, key)
             .map_err(|e| SourceError::Failed {
@@ -143,6 +143,10 @@ impl TileSource for RefinedSource {
                 source_name: self.name.clone(),
                 message: e.to_string(),
             })?;
+        // Real imagery deeper than the terrain's data replaces the refined colour.
+        if let Some(colour) = self.inner.imagery_colour(key, cancel)? {
+            tile.colour = colour;
+        }
         Ok(Some(TerrainData {
             generated: true,
             ..TerrainData::build(

@@ -74,6 +74,17 @@ pub trait TerrainSource: TileSource<Tile = TerrainData> {
         let _ = (lon_rad, lat_rad);
         None
     }
+    /// Real colour for a tile the source has no terrain data for but imagery deeper than its
+    /// terrain (so refinement below the terrain's data keeps real imagery); `None` where it
+    /// has none.
+    fn imagery_colour(
+        &self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<globus_terrain::ColourImage>, SourceError> {
+        let _ = (key, cancel);
+        Ok(None)
+    }
 }
 
 /// A terrain tile ready for selection and rendering: its data, its mesh, and conservative

@@ -555,3 +555,243 @@ fn walk_bytes(dir: &Path) -> u64 {
     }
     total
 }
+
+/// Writes a synthetic `{z}/{x}/{y}.png` pyramid with its metadata.json.
+#[allow(clippy::too_many_arguments)]
+fn write_pyramid(
+    dir: &Path,
+    scheme: TilingScheme,
+    max_level: u8,
+    size: u32,
+    grid: &str,
+    encoding: Option<&str>,
+    skip: &[TileKey],
+    region: Option<globus_tiling::GeoRect>,
+    pixel: impl Fn(TileKey, u32, u32) -> [u8; 4],
+) {
+    for z in 0..=max_level {
+        for x in 0..scheme.tiles_x(z) as u32 {
+            for y in 0..scheme.tiles_y(z) as u32 {
+                let key = TileKey::new(z, x, y);
+                let r = scheme.rect(key);
+                let outside = region.is_some_and(|g| {
+                    r.east <= g.west || r.west >= g.east || r.north <= g.south || r.south >= g.north
+                });
+                if skip.contains(&key) || outside {
+                    continue;
+                }
+                let mut px = Vec::with_capacity((size * size * 4) as usize);
+                for j in 0..size {
+                    for i in 0..size {
+                        px.extend_from_slice(&pixel(key, i, j));
+                    }
+                }
+                let path = dir.join(format!("{z}/{x}/{y}.png"));
+                std::fs::create_dir_all(path.parent().expect("dir")).expect("mkdir");
+                let file = std::fs::File::create(&path).expect("create");
+                let mut enc = png::Encoder::new(std::io::BufWriter::new(file), size, size);
+                enc.set_color(png::ColorType::Rgba);
+                enc.set_depth(png::BitDepth::Eight);
+                let mut w = enc.write_header().expect("header");
+                w.write_image_data(&px).expect("pixels");
+            }
+        }
+    }
+    let bounds = region.map_or([-180.0, -90.0, 180.0, 90.0], |g| g.to_degrees());
+    let meta = serde_json::json!({
+        "scheme": scheme.name(), "minzoom": 0, "maxzoom": max_level, "tile_size": size,
+        "sample_grid": grid, "encoding": encoding, "format": "png", "layout": "xyz",
+        "bounds": bounds,
+    });
+    std::fs::write(dir.join("metadata.json"), meta.to_string()).expect("metadata");
+}
+
+/// A solid colour naming a tile: red = 20 * level, green = x, blue = y.
+fn key_colour(k: TileKey) -> [u8; 4] {
+    [
+        20 * k.level(),
+        (k.x() % 256) as u8,
+        (k.y() % 256) as u8,
+        255,
+    ]
+}
+
+/// The texel at the centre of the north-west quadrant.
+fn quadrant_texel(c: &globus_terrain::ColourImage) -> [u8; 3] {
+    let s = c.size as usize;
+    let i = ((s / 4) * s + s / 4) * 4;
+    [c.mips[0][i], c.mips[0][i + 1], c.mips[0][i + 2]]
+}
+
+#[test]
+fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors() {
+    use globus_stream::RefinedSource;
+    use globus_stream::open::imagery_pyramid;
+    use globus_terrain::refine::RefineOptions;
+
+    let base = scratch("imagery-depth");
+    // Elevation to level 2 (a flat 100 m), imagery in 64-pixel tiles to level 8 (over six
+    // degrees square only): each imagery tile one colour.
+    let terrarium = ElevationEncoding::Terrarium.encode(100.0);
+    write_pyramid(
+        &base.join("dem"),
+        TilingScheme::Geographic,
+        2,
+        256,
+        "corners",
+        Some("terrarium"),
+        &[],
+        None,
+        |_, _, _| [terrarium[0], terrarium[1], terrarium[2], 255],
+    );
+    let region = globus_tiling::GeoRect::from_degrees(8.0, 54.0, 14.0, 60.0);
+    let geo = TilingScheme::Geographic;
+    let engine = |lon: f64, lat: f64| {
+        geo.tile_at(lon.to_radians(), lat.to_radians(), 7)
+            .expect("key")
+    };
+    let (a, b, c) = (engine(10.0, 58.5), engine(11.5, 58.5), engine(10.0, 57.0));
+    let nw = |k: TileKey| TileKey::new(8, 2 * k.x(), 2 * k.y());
+    // Holes: one imagery tile missing, one broken (not an image).
+    let (missing, broken) = (nw(b), nw(c));
+    write_pyramid(
+        &base.join("img"),
+        geo,
+        8,
+        64,
+        "cells",
+        None,
+        &[missing],
+        Some(region),
+        |k, _, _| key_colour(k),
+    );
+    std::fs::write(
+        base.join(format!("img/8/{}/{}.png", broken.x(), broken.y())),
+        b"<html>oops</html>",
+    )
+    .expect("broken tile");
+    let server = FaultServer::serve_dir(&base);
+    let http = client(HttpOptions::default());
+    let open = |path: &str, kind| {
+        open_layer(
+            &SourceSpec::parse(&server.url(path)).expect("spec"),
+            kind,
+            &http,
+            None,
+        )
+        .expect("layer")
+    };
+    let dem = elevation_pyramid(open("/dem", LayerKind::Elevation), DecodeLimits::default())
+        .expect("dem");
+    let img = imagery_pyramid(open("/img", LayerKind::Imagery), DecodeLimits::default());
+    let raster = RasterTerrainSource::new(
+        vec![dem],
+        vec![img],
+        Ellipsoid::WGS84,
+        (0.0, 200.0),
+        MeshOptions::default(),
+    )
+    .expect("source");
+    // Elevation data ends at engine level 5 (256-sample level-2 tiles); refinement below.
+    assert_eq!(raster.max_level(), 5);
+    let refined = RefinedSource::new(
+        Arc::new(raster),
+        RefineOptions::default(),
+        12,
+        MeshOptions::default(),
+    );
+    let cancel = Cancel::new();
+    // 64-pixel imagery at level 8 matches 128-texel engine tiles at level 7: the north-west
+    // quadrant of engine tile 7/x/y shows imagery tile 8/2x/2y, real colour, two levels
+    // below the terrain's data.
+    for (key, want_from) in [
+        (a, nw(a)),
+        // Missing: the level-7 imagery tile over it, cropped and scaled.
+        (b, b),
+        // Broken: the same, and it was asked for once only.
+        (c, c),
+    ] {
+        let t = refined.load(key, &cancel).expect("load").expect("tile");
+        assert!(t.generated, "{key} is refined below the data");
+        let want = key_colour(want_from);
+        assert_eq!(
+            quadrant_texel(&t.tile.colour),
+            [want[0], want[1], want[2]],
+            "{key}"
+        );
+    }
+    let _ = refined.load(c, &cancel).expect("again");
+    assert_eq!(
+        server.count(&format!("/img/8/{}/{}.png", broken.x(), broken.y())),
+        1
+    );
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+#[test]
+fn web_mercator_imagery_leaves_no_hole_or_smear_at_the_poles() {
+    use globus_stream::open::imagery_pyramid;
+
+    let base = scratch("poles");
+    // Web Mercator imagery whose top rows alternate red and green pixels and whose bottom
+    // rows are white: the caps must be the even mix, not the streaks of a stretched row.
+    write_pyramid(
+        &base.join("merc"),
+        TilingScheme::WebMercator,
+        2,
+        256,
+        "cells",
+        None,
+        &[],
+        None,
+        |_, i, j| match j {
+            0..=1 if i % 2 == 0 => [255, 0, 0, 255],
+            0..=1 => [0, 255, 0, 255],
+            254..=255 => [255, 255, 255, 255],
+            _ => [0, 0, 128, 255],
+        },
+    );
+    let http = client(HttpOptions::default());
+    let layer = open_layer(
+        &SourceSpec::parse(&base.join("merc").display().to_string()).expect("spec"),
+        LayerKind::Imagery,
+        &http,
+        None,
+    )
+    .expect("layer");
+    let source = RasterTerrainSource::new(
+        Vec::new(),
+        vec![imagery_pyramid(layer, DecodeLimits::default())],
+        Ellipsoid::WGS84,
+        (0.0, 0.0),
+        MeshOptions::default(),
+    )
+    .expect("source");
+    assert_eq!(source.max_level(), 2);
+    let cancel = Cancel::new();
+    for (key, want) in [
+        // Geographic level 2 tiles touching the north and south poles (45..90 degrees).
+        (TileKey::new(2, 3, 0), [128u8, 128, 0]),
+        (TileKey::new(2, 5, 3), [255, 255, 255]),
+    ] {
+        let t = source.load(key, &cancel).expect("load").expect("tile");
+        let c = &t.tile.colour;
+        let s = c.size as usize;
+        // Texel rows beyond 86.05 degrees (the limit plus the blend): the top (or bottom)
+        // 128 * (90 - 86.06) / 45 = 11 rows, the rows nearest the pole first.
+        for row in 0..11 {
+            let r = if key.y() == 0 { row } else { s - 1 - row };
+            for col in (0..s).step_by(7) {
+                let i = (r * s + col) * 4;
+                let got = [c.mips[0][i], c.mips[0][i + 1], c.mips[0][i + 2]];
+                for k in 0..3 {
+                    assert!(
+                        got[k].abs_diff(want[k]) <= 2,
+                        "{key} row {r} col {col}: {got:?} vs cap {want:?}"
+                    );
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&base);
+}
