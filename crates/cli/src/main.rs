@@ -9,7 +9,7 @@ use globus_app::config::Config;
 use globus_app::engine::{CameraSpec, GlobeOptions};
 use globus_app::geo_cmd;
 use globus_app::mesh_cmd::{self, MeshArgs};
-use globus_app::offscreen::{Offscreen, save_png};
+use globus_app::offscreen::{Offscreen, holes_inside, save_png};
 use globus_app::path::CameraPath;
 use globus_app::tile_cmd::{self, MergeArgs, TileArgs};
 use globus_app::viewer::{self, ViewerOptions};
@@ -732,27 +732,6 @@ fn bench_jump(
     });
     println!("{out}");
     Ok(())
-}
-
-/// Pixels whose centre ray hits `body`, and how many of those show no terrain.
-fn holes_inside(
-    img: &globus_render::RgbaImage,
-    view: &globus_geo::View,
-    body: &globus_geo::Ellipsoid,
-) -> (u32, u32) {
-    let (mut inside, mut holes) = (0, 0);
-    for y in 0..img.height {
-        for x in 0..img.width {
-            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
-            if body.ray_hit(view.position, dir).is_some() {
-                inside += 1;
-                if img.pixels[((y * img.width + x) * 4 + 3) as usize] != 255 {
-                    holes += 1;
-                }
-            }
-        }
-    }
-    (inside, holes)
 }
 
 /// Resident memory of this process, MiB (Linux; NaN elsewhere).

@@ -97,3 +97,21 @@ pub fn save_png(image: &RgbaImage, path: &std::path::Path) -> anyhow::Result<()>
     )
     .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))
 }
+
+/// Pixels whose centre ray hits `body`, and how many of those show no terrain (alpha below
+/// 255): the holes a viewer would see inside the planet's silhouette.
+pub fn holes_inside(img: &RgbaImage, view: &View, body: &globus_geo::Ellipsoid) -> (u32, u32) {
+    let (mut inside, mut holes) = (0, 0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(view.position, dir).is_some() {
+                inside += 1;
+                if img.pixels[((y * img.width + x) * 4 + 3) as usize] != 255 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    (inside, holes)
+}

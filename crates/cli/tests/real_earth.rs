@@ -10,7 +10,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use globus_app::engine::{CameraSpec, GlobeOptions};
-use globus_app::offscreen::{Offscreen, save_png};
+use globus_app::offscreen::{Offscreen, holes_inside, save_png};
 use globus_geo::{Cartographic, Ellipsoid};
 use globus_stream::open::SourceSpec;
 use globus_test_support::http::{Fault, FaultServer};
@@ -104,18 +104,7 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     let e = Ellipsoid::WGS84;
     let body = e.grown(-16_000.0);
     let img = &frame.image;
-    let (mut inside, mut holes) = (0, 0);
-    for y in 0..h {
-        for x in 0..w {
-            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
-            if body.ray_hit(view.position, dir).is_some() {
-                inside += 1;
-                if img.pixels[((y * w + x) * 4 + 3) as usize] != 255 {
-                    holes += 1;
-                }
-            }
-        }
-    }
+    let (inside, holes) = holes_inside(img, &view, &body);
     assert!(inside > 20_000 && holes == 0, "{holes} holes of {inside}");
 
     // The continents are where they are: deserts are much warmer (red minus blue) than the

@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use globus_app::engine::{CameraSpec, GlobeOptions};
-use globus_app::offscreen::{Offscreen, RenderedFrame, save_png};
+use globus_app::offscreen::{Offscreen, RenderedFrame, holes_inside, save_png};
 use globus_geo::{Ellipsoid, View};
 use globus_render::RgbaImage;
 
@@ -55,23 +55,6 @@ fn covered(img: &RgbaImage, x: u32, y: u32) -> bool {
 fn coverage(img: &RgbaImage) -> f64 {
     let n = img.pixels.chunks_exact(4).filter(|p| p[3] == 255).count();
     n as f64 / f64::from(img.width * img.height)
-}
-
-/// Pixels whose centre ray hits `body`, and how many of those show no terrain.
-fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32) {
-    let (mut inside, mut holes) = (0, 0);
-    for y in 0..img.height {
-        for x in 0..img.width {
-            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
-            if body.ray_hit(view.position, dir).is_some() {
-                inside += 1;
-                if !covered(img, x, y) {
-                    holes += 1;
-                }
-            }
-        }
-    }
-    (inside, holes)
 }
 
 #[test]
