@@ -503,4 +503,53 @@ mod tests {
         assert_eq!(count, 2);
         assert!(retry_at >= Instant::now() + 2 * FAILED_RETRY_AFTER - Duration::from_secs(1));
     }
+
+    #[test]
+    fn the_cache_budget_holds_under_a_stream_of_requests() {
+        let source = Arc::new(ProceduralSource::new(24, 12));
+        let budget = 2 << 20;
+        let mut layer = TerrainLayer::new(
+            source,
+            TerrainLayerOptions {
+                cache_bytes: budget,
+                workers: 2,
+            },
+        );
+        let mut state = 7u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut peak = 0;
+        let mut arrived = 0;
+        for _ in 0..100 {
+            // Sixteen random tiles at levels 5-8 wanted each frame, nothing drawn.
+            let wanted: Vec<TileRequest> = (0..16)
+                .map(|_| {
+                    let level = 5 + (next() % 4) as u8;
+                    let key = TileKey::new(
+                        level,
+                        (next() % (2 << level)) as u32,
+                        (next() % (1 << level)) as u32,
+                    );
+                    TileRequest { key, priority: 1.0 }
+                })
+                .collect();
+            let stats = layer.update(&[], &wanted);
+            arrived += stats.arrived;
+            peak = peak.max(stats.cached_bytes);
+            arrived += layer.wait_for_tiles(Duration::from_millis(50)) as u32;
+        }
+        let stats = layer.update(&[], &[]);
+        peak = peak.max(stats.cached_bytes);
+        // Far more arrived than fits, and the cache never held more than its budget after an
+        // update (the two roots, always kept, fit in it).
+        assert!(
+            arrived as usize * 150_000 > 2 * budget,
+            "{arrived} tiles arrived"
+        );
+        assert!(peak <= budget, "peak {peak} bytes, budget {budget}");
+    }
 }
