@@ -55,6 +55,8 @@ for drawn in (True, False):
 for name in ("alps-real", "alps-procedural"):
     d = json.load(open(f"{out}/{name}.json"))
     print(f"{name}: loaded {d['tiles_loaded']}, never drawn {d['loaded_never_drawn']} "
-          f"({100 * d['loaded_never_drawn_fraction']:.1f} %), loaded again while cached "
-          f"{d['loaded_again_while_cached']}, stopped in flight {d['loads_stopped_in_flight']}")
+          f"({100 * d['loaded_never_drawn_fraction']:.1f} %); from fetched data {d['fetched']}, "
+          f"never drawn {d['fetched_never_drawn']} ({100 * d['fetched_never_drawn_fraction']:.1f} %); "
+          f"loaded again while cached {d['loaded_again_while_cached']}, "
+          f"stopped in flight {d['loads_stopped_in_flight']}")
 EOF
