@@ -795,3 +795,104 @@ fn web_mercator_imagery_leaves_no_hole_or_smear_at_the_poles() {
     }
     let _ = std::fs::remove_dir_all(&base);
 }
+
+#[test]
+fn wms_and_subdomain_templates_against_a_loopback_server() {
+    use globus_stream::fetch::{Fetch, TemplateFetch, WmsFetch, WmsVersion};
+    let server = FaultServer::in_memory();
+    let mut png = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut png, 4, 4);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().expect("header");
+        w.write_image_data(&[200u8; 64]).expect("pixels");
+    }
+    server.put("/wms", png.clone());
+    server.put(
+        "/broken-wms",
+        br#"<?xml version="1.0"?><ServiceExceptionReport><ServiceException>Layer not defined</ServiceException></ServiceExceptionReport>"#.to_vec(),
+    );
+    let http = client(HttpOptions::default());
+    let cancel = Cancel::new();
+    let wms = WmsFetch::new(
+        Arc::clone(&http),
+        &server.url("/wms"),
+        "relief",
+        WmsVersion::V1_3_0,
+        TilingScheme::Geographic,
+        "image/png",
+        256,
+    )
+    .expect("wms");
+    // Geographic level 2, x 5, y 1: lon 45..90 E, lat 0..45 N; 1.3.0 puts latitude first.
+    let got = wms
+        .fetch(TileKey::new(2, 5, 1), &cancel)
+        .expect("fetch")
+        .expect("bytes");
+    assert_eq!(got.bytes, png);
+    let target = server.requests().last().expect("request").target.clone();
+    assert!(
+        target.starts_with("/wms?SERVICE=WMS&REQUEST=GetMap&VERSION=1.3.0"),
+        "{target}"
+    );
+    assert!(
+        target.contains("CRS=EPSG:4326&BBOX=0,45,45,90&WIDTH=256&HEIGHT=256"),
+        "{target}"
+    );
+    let broken = WmsFetch::new(
+        Arc::clone(&http),
+        &server.url("/broken-wms"),
+        "relief",
+        WmsVersion::V1_1_1,
+        TilingScheme::Geographic,
+        "image/png",
+        256,
+    )
+    .expect("wms");
+    let e = broken
+        .fetch(TileKey::new(2, 5, 1), &cancel)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("XML") && e.contains("Layer not defined"), "{e}");
+
+    // `{s}` over two names of the loopback host: both are used, each tile always the same.
+    server.put("/t/3/4/2.png", png.clone());
+    server.put("/t/3/5/2.png", png.clone());
+    let port = server.url("").rsplit(':').next().expect("port").to_string();
+    let t = TemplateFetch::new(
+        Arc::clone(&http),
+        &format!("http://{{s}}:{port}/t/{{z}}/{{x}}/{{y}}.png"),
+        &["127.0.0.1", "localhost"],
+        TilingScheme::Geographic,
+    )
+    .expect("template");
+    for _ in 0..2 {
+        for x in [4, 5] {
+            assert!(
+                t.fetch(TileKey::new(3, x, 2), &cancel)
+                    .expect("fetch")
+                    .is_some()
+            );
+        }
+    }
+    let hosts: Vec<String> = server
+        .requests()
+        .iter()
+        .filter(|r| r.target.starts_with("/t/"))
+        .map(|r| {
+            format!(
+                "{} {}",
+                r.target,
+                r.headers.get("host").cloned().unwrap_or_default()
+            )
+        })
+        .collect();
+    assert_eq!(hosts.len(), 4);
+    assert_eq!(hosts[0], hosts[2], "tile 3/4/2 goes to the same host twice");
+    assert_ne!(
+        hosts[0].split(' ').nth(1).map(|h| h.split(':').next()),
+        hosts[1].split(' ').nth(1).map(|h| h.split(':').next()),
+        "neighbouring tiles go to different hosts: {hosts:?}"
+    );
+}
