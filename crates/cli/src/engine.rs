@@ -207,7 +207,22 @@ impl Globe {
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
     ) -> anyhow::Result<Self> {
-        let source = terrain_source(options)?;
+        Ok(Self::with_source(
+            device,
+            colour_format,
+            options,
+            terrain_source(options)?,
+        ))
+    }
+
+    /// A globe over a terrain source opened beforehand (see [`terrain_source`]), so that a
+    /// source that cannot be opened fails before any window or GPU context exists.
+    pub fn with_source(
+        device: &wgpu::Device,
+        colour_format: wgpu::TextureFormat,
+        options: &GlobeOptions,
+        source: Arc<dyn TerrainSource>,
+    ) -> Self {
         let layer = TerrainLayer::new(
             source,
             TerrainLayerOptions {
@@ -234,7 +249,7 @@ impl Globe {
             near_m: 0.01,
             max_level: layer.max_level(),
         };
-        Ok(Self {
+        Self {
             layer,
             renderer: GlobeRenderer::new(device, colour_format, pool),
             options: selection_options,
@@ -242,7 +257,7 @@ impl Globe {
             selection: Selection::default(),
             lighting: None,
             relax_detail: true,
-        })
+        }
     }
 
     /// The planet's ellipsoid.

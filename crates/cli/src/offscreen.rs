@@ -32,8 +32,10 @@ pub struct RenderedFrame {
 impl Offscreen {
     /// A headless context and a `width` x `height` target.
     pub fn new(options: &GlobeOptions, width: u32, height: u32) -> anyhow::Result<Self> {
+        // Sources first: one that cannot be opened fails before a GPU context exists.
+        let source = crate::engine::terrain_source(options)?;
         let ctx = GpuContext::headless()?;
-        let globe = Globe::new(&ctx.device, OffscreenTarget::FORMAT, options)?;
+        let globe = Globe::with_source(&ctx.device, OffscreenTarget::FORMAT, options, source);
         let target = OffscreenTarget::new(&ctx.device, width, height);
         Ok(Self { ctx, globe, target })
     }

@@ -54,8 +54,11 @@ pub fn run(options: ViewerOptions) -> anyhow::Result<()> {
     let event_loop = EventLoop::new().map_err(|e| {
         anyhow!("cannot open a window ({e}); use `globus render` to draw a frame offscreen")
     })?;
+    // Sources first: one that cannot be opened fails before a window opens.
+    let source = crate::engine::terrain_source(&options.globe)?;
     let mut app = App {
         options,
+        source,
         state: None,
         error: None,
         started: Instant::now(),
@@ -71,6 +74,7 @@ pub fn run(options: ViewerOptions) -> anyhow::Result<()> {
 
 struct App {
     options: ViewerOptions,
+    source: Arc<dyn globus_stream::TerrainSource>,
     state: Option<State>,
     error: Option<anyhow::Error>,
     started: Instant,
@@ -110,7 +114,7 @@ impl ApplicationHandler for App {
         if self.state.is_some() {
             return;
         }
-        match State::new(event_loop, &self.options) {
+        match State::new(event_loop, &self.options, Arc::clone(&self.source)) {
             Ok(s) => {
                 s.window.request_redraw();
                 self.state = Some(s);
@@ -182,7 +186,11 @@ impl ApplicationHandler for App {
 }
 
 impl State {
-    fn new(event_loop: &ActiveEventLoop, options: &ViewerOptions) -> anyhow::Result<Self> {
+    fn new(
+        event_loop: &ActiveEventLoop,
+        options: &ViewerOptions,
+        source: Arc<dyn globus_stream::TerrainSource>,
+    ) -> anyhow::Result<Self> {
         let attributes = Window::default_attributes()
             .with_title("Globus")
             .with_inner_size(PhysicalSize::new(options.width, options.height));
@@ -225,7 +233,7 @@ impl State {
             })
             .context("the window surface is not supported by the adapter")?;
         surface.configure(&ctx.device, &config);
-        let globe = Globe::new(&ctx.device, format, &options.globe)?;
+        let globe = Globe::with_source(&ctx.device, format, &options.globe, source);
         let view = options
             .camera
             .view(&globe, options.fov_deg, config.width, config.height);

@@ -134,6 +134,26 @@ fn bad_arguments_end_with_one_clear_line() {
             "/nonexistent/path.json",
         ),
         ("frobnicate", "frobnicate"),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --terrain /nonexistent/dem",
+            "/nonexistent/dem",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --terrain http://127.0.0.1:9/{z}/{x}.png",
+            "names no tile",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --imagery x.mbtiles#colour=red",
+            "unknown option",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --config /nonexistent/globus.toml",
+            "/nonexistent/globus.toml",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --terrain ./x --refine-below 5",
+            "--refine-below",
+        ),
     ];
     for (args, needle) in cases {
         let args: Vec<&str> = args
