@@ -9,20 +9,11 @@
 # Usage: tools/real-earth-demo.sh [OUT_DIR] [PORT]   (images land in OUT_DIR/*.png)
 set -eu
 here=$(cd "$(dirname "$0")/.." && pwd)
-data="$here/../shared/data"
 out=${1:-"$here/target/real-earth"}
 port=${2:-8765}
-mkdir -p "$out/tiles"
-cd "$here"
-cargo build --release --quiet
+"$here/tools/tile-demo-data.sh" "$out/tiles"
 globus="$here/target/release/globus"
-
-"$globus" tile dem --in "$data/earth-topology-2048x1024.png" --height-scale 25.1 \
-    --scheme geographic --force --out "$out/tiles/topo"
-"$globus" tile imagery --in "$data/bmng-5400x2700.jpg" --scheme geographic --format jpeg \
-    --force --out "$out/tiles/bmng"
-"$globus" tile dem --in "$data/N57E011.hgt" --scheme geographic --force --out "$out/tiles/srtm"
-
+cd "$here"
 python3 -m http.server "$port" --bind 127.0.0.1 --directory "$out/tiles" >"$out/server.log" 2>&1 &
 server=$!
 trap 'kill $server 2>/dev/null' EXIT INT TERM

@@ -10,19 +10,11 @@
 # Usage: tools/stream-figures.sh [OUT_DIR] [PORT]
 set -eu
 here=$(cd "$(dirname "$0")/.." && pwd)
-data="$here/../shared/data"
 out=${1:-"$here/target/stream-figures"}
 port=${2:-8766}
-mkdir -p "$out/tiles"
-cd "$here"
-cargo build --release --quiet
+"$here/tools/tile-demo-data.sh" "$out/tiles"
 globus="$here/target/release/globus"
-"$globus" tile dem --in "$data/earth-topology-2048x1024.png" --height-scale 25.1 \
-    --scheme geographic --force --out "$out/tiles/topo" >/dev/null
-"$globus" tile imagery --in "$data/bmng-5400x2700.jpg" --scheme geographic --format jpeg \
-    --force --out "$out/tiles/bmng" >/dev/null
-"$globus" tile dem --in "$data/N57E011.hgt" --scheme geographic --force \
-    --out "$out/tiles/srtm" >/dev/null
+cd "$here"
 python3 "$here/tools/slow_http.py" "$out/tiles" "$port" 50 2>"$out/server.log" &
 server=$!
 trap 'kill $server 2>/dev/null' EXIT INT TERM

@@ -125,27 +125,23 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
     }
     let client = Arc::new(HttpClient::new(options.http.clone()));
     let limits = DecodeLimits::default();
+    let open = |spec: &SourceSpec, kind: LayerKind| {
+        open_layer(spec, kind, &client, options.disk_cache.as_ref()).map_err(|e| {
+            let what = match kind {
+                LayerKind::Elevation => "terrain",
+                LayerKind::Imagery => "imagery",
+            };
+            anyhow::anyhow!("{what} {}: {e}", spec.url)
+        })
+    };
     let mut elevation = Vec::new();
     for spec in &options.terrain {
-        let layer = open_layer(
-            spec,
-            LayerKind::Elevation,
-            &client,
-            options.disk_cache.as_ref(),
-        )
-        .map_err(|e| anyhow::anyhow!("terrain {}: {e}", spec.url))?;
+        let layer = open(spec, LayerKind::Elevation)?;
         elevation.push(elevation_pyramid(layer, limits).map_err(anyhow::Error::msg)?);
     }
     let mut imagery = Vec::new();
     for spec in &options.imagery {
-        let layer = open_layer(
-            spec,
-            LayerKind::Imagery,
-            &client,
-            options.disk_cache.as_ref(),
-        )
-        .map_err(|e| anyhow::anyhow!("imagery {}: {e}", spec.url))?;
-        imagery.push(imagery_pyramid(layer, limits));
+        imagery.push(imagery_pyramid(open(spec, LayerKind::Imagery)?, limits));
     }
     let raster = RasterTerrainSource::new(
         elevation,
@@ -500,6 +496,20 @@ pub struct CameraSpec {
     pub pitch_deg: f64,
     /// Whether `alt_m` is above the ground under the camera.
     pub above_ground: bool,
+}
+
+impl From<crate::path::Pose> for CameraSpec {
+    /// A path's pose (altitude above the ellipsoid).
+    fn from(p: crate::path::Pose) -> Self {
+        Self {
+            lon_deg: p.lon,
+            lat_deg: p.lat,
+            alt_m: p.alt,
+            heading_deg: p.heading,
+            pitch_deg: p.pitch,
+            above_ground: false,
+        }
+    }
 }
 
 impl CameraSpec {

@@ -550,15 +550,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
         // A viewer opens on its start view and shows it complete before the flight starts:
         // load it first, so the flight is not timed from a cold start (pipeline compilation
         // and the first tiles take the first second).
-        let pose = path.pose(0.0);
-        let start = CameraSpec {
-            lon_deg: pose.lon,
-            lat_deg: pose.lat,
-            alt_m: pose.alt,
-            heading_deg: pose.heading,
-            pitch_deg: pose.pitch,
-            above_ground: false,
-        };
+        let start = CameraSpec::from(path.pose(0.0));
         let view = start.view(&off.globe, a.globe.fov_deg, width, height);
         off.render_complete(&view, Duration::from_secs(120))?;
     }
@@ -575,15 +567,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
                 std::thread::sleep(Duration::from_secs_f64(ahead));
             }
         }
-        let pose = path.pose(t);
-        let camera = CameraSpec {
-            lon_deg: pose.lon,
-            lat_deg: pose.lat,
-            alt_m: pose.alt,
-            heading_deg: pose.heading,
-            pitch_deg: pose.pitch,
-            above_ground: false,
-        };
+        let camera = CameraSpec::from(path.pose(t));
         let view = camera.view(&off.globe, a.globe.fov_deg, width, height);
         let started = Instant::now();
         let r = off.globe.frame(&off.ctx.device, &off.ctx.queue, &view);

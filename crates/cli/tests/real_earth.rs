@@ -15,24 +15,14 @@ use globus_geo::{Cartographic, Ellipsoid};
 use globus_stream::open::SourceSpec;
 use globus_test_support::http::{Fault, FaultServer};
 use globus_test_support::shared_data;
-use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob, TileLayout};
+use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob};
 use globus_tiling::TilingScheme;
 
 fn tile(kind: JobKind, input: &str, out: &Path, scale_max: Option<u8>) {
     let job = TileJob {
-        kind,
-        inputs: vec![shared_data(input)],
-        output: out.to_path_buf(),
-        scheme: TilingScheme::Geographic,
-        tile_size: 256,
-        min_level: 0,
         max_level: scale_max,
-        bounds: None,
         threads: Some(2),
-        resume: false,
-        force: true,
-        layout: TileLayout::Xyz,
-        shard: None,
+        ..TileJob::new(kind, vec![shared_data(input)], out.to_path_buf())
     };
     globus_tiler::run(&job).unwrap_or_else(|e| panic!("tiling {input}: {e}"));
 }

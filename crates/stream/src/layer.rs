@@ -447,16 +447,20 @@ mod tests {
     use super::*;
     use crate::ProceduralSource;
 
+    /// A layer over the default procedural planet down to `max_level`.
+    fn procedural_layer(max_level: u8, cache_bytes: usize, workers: usize) -> TerrainLayer {
+        TerrainLayer::new(
+            Arc::new(ProceduralSource::new(24, max_level)),
+            TerrainLayerOptions {
+                cache_bytes,
+                workers,
+            },
+        )
+    }
+
     #[test]
     fn no_data_is_remembered_after_its_record_is_dropped() {
-        let source = Arc::new(ProceduralSource::new(24, 3));
-        let mut layer = TerrainLayer::new(
-            source,
-            TerrainLayerOptions {
-                cache_bytes: 1 << 30,
-                workers: 1,
-            },
-        );
+        let mut layer = procedural_layer(3, 1 << 30, 1);
         let parent = TileKey::new(3, 5, 2);
         let child = TileKey::new(4, 10, 4);
         layer.accept(child, Outcome::NoData);
@@ -473,14 +477,7 @@ mod tests {
 
     #[test]
     fn failed_tiles_are_asked_for_again_after_a_cool_down() {
-        let source = Arc::new(ProceduralSource::new(24, 3));
-        let mut layer = TerrainLayer::new(
-            source,
-            TerrainLayerOptions {
-                cache_bytes: 1 << 30,
-                workers: 1,
-            },
-        );
+        let mut layer = procedural_layer(3, 1 << 30, 1);
         let key = TileKey::new(2, 1, 1);
         let failure = crate::SourceError::Failed {
             key,
@@ -506,15 +503,8 @@ mod tests {
 
     #[test]
     fn the_cache_budget_holds_under_a_stream_of_requests() {
-        let source = Arc::new(ProceduralSource::new(24, 12));
         let budget = 2 << 20;
-        let mut layer = TerrainLayer::new(
-            source,
-            TerrainLayerOptions {
-                cache_bytes: budget,
-                workers: 2,
-            },
-        );
+        let mut layer = procedural_layer(12, budget, 2);
         let mut state = 7u64;
         let mut next = || {
             state ^= state << 13;

@@ -18,7 +18,7 @@ use globus_stream::{
 use globus_terrain::MeshOptions;
 use globus_test_support::http::{Fault, FaultServer};
 use globus_test_support::shared_data;
-use globus_tiler::{ElevationEncoding, JobKind, TileJob, TileLayout};
+use globus_tiler::{ElevationEncoding, JobKind, TileJob};
 use globus_tiling::{TileKey, TileRequest, TilingScheme};
 
 const MAX_LEVEL: u8 = 7;
@@ -27,22 +27,16 @@ const MAX_LEVEL: u8 = 7;
 /// archive) once per test process.
 fn tile_srtm(out: &Path) {
     let job = TileJob {
-        kind: JobKind::Dem {
-            encoding: ElevationEncoding::Terrarium,
-            height_scale: None,
-        },
-        inputs: vec![shared_data("N57E011.hgt")],
-        output: out.to_path_buf(),
-        scheme: TilingScheme::Geographic,
-        tile_size: 256,
-        min_level: 0,
         max_level: Some(MAX_LEVEL),
-        bounds: None,
         threads: Some(2),
-        resume: false,
-        force: true,
-        layout: TileLayout::Xyz,
-        shard: None,
+        ..TileJob::new(
+            JobKind::Dem {
+                encoding: ElevationEncoding::Terrarium,
+                height_scale: None,
+            },
+            vec![shared_data("N57E011.hgt")],
+            out.to_path_buf(),
+        )
     };
     globus_tiler::run(&job).unwrap_or_else(|e| panic!("tiling into {}: {e}", out.display()));
 }

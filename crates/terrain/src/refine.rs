@@ -30,7 +30,7 @@ use globus_geo::{Cartographic, Ellipsoid};
 use globus_tiling::{GeoRect, TileKey, TilingScheme};
 
 use crate::generate::{catmull_rom, lerp_exact};
-use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
+use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, mesh_height_at};
 use crate::noise::{NOISE_BOUND, Octaves};
 use crate::planet::smoothstep;
 use crate::tile::{ColourImage, TerrainTile, height_range};
@@ -241,23 +241,12 @@ impl Refiner {
         }
         // Interpolation error: the mesh against the surface at every cell's centre and edge
         // midpoints (where linear interpolation of the finest octave errs most).
-        let at =
-            |i: i32, j: i32| f64::from(heights_m[((j + 1) as usize) * SIDE + (i + 1) as usize]);
         let mut interpolation = 0.0f64;
         for cj in 0..MESH_SEGMENTS as i32 {
             for ci in 0..MESH_SEGMENTS as i32 {
                 for (s, t) in [(0.5, 0.5), (0.5, 0.0), (0.0, 0.5)] {
                     let (lon, lat) = (lon_at(f64::from(ci) + s), lat_at(f64::from(cj) + t));
-                    let mesh = interpolate_in_cell(
-                        ci,
-                        cj,
-                        at(ci, cj),
-                        at(ci + 1, cj),
-                        at(ci, cj + 1),
-                        at(ci + 1, cj + 1),
-                        s,
-                        t,
-                    );
+                    let mesh = mesh_height_at(&heights_m, f64::from(ci) + s, f64::from(cj) + t);
                     interpolation = interpolation.max((surface(lon, lat, included).0 - mesh).abs());
                 }
             }
@@ -481,21 +470,7 @@ mod tests {
                             f64::from(qx as i32 * half) + f64::from(i) / 2.0,
                             f64::from(qy as i32 * half) + f64::from(j) / 2.0,
                         );
-                        let (ci, cj) = (
-                            (x.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
-                            (y.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
-                        );
-                        let h = |a: i32, b: i32| f64::from(parent.height_at(a, b));
-                        let mesh = interpolate_in_cell(
-                            ci,
-                            cj,
-                            h(ci, cj),
-                            h(ci + 1, cj),
-                            h(ci, cj + 1),
-                            h(ci + 1, cj + 1),
-                            x - f64::from(ci),
-                            y - f64::from(cj),
-                        );
+                        let mesh = mesh_height_at(&parent.heights_m, x, y);
                         worst = worst.max((f64::from(child.height_at(i, j)) - mesh).abs());
                     }
                 }

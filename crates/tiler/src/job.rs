@@ -67,6 +67,29 @@ pub struct TileJob {
     pub shard: Option<ShardSpec>,
 }
 
+impl TileJob {
+    /// A job of `kind` from `inputs` to `output` with the command line's defaults: geographic
+    /// 256-sample tiles from level 0 to the first level as fine as the source, all cores, XYZ
+    /// rows, an existing output replaced, no shard.
+    pub fn new(kind: JobKind, inputs: Vec<PathBuf>, output: PathBuf) -> Self {
+        Self {
+            kind,
+            inputs,
+            output,
+            scheme: TilingScheme::Geographic,
+            tile_size: 256,
+            min_level: 0,
+            max_level: None,
+            bounds: None,
+            threads: None,
+            resume: false,
+            force: true,
+            layout: TileLayout::Xyz,
+            shard: None,
+        }
+    }
+}
+
 /// The result of a job, printed as one JSON line.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use globus_tiler::{JobKind, TileJob, TileLayout};
+use globus_tiler::{JobKind, TileJob};
 use globus_tiling::TilingScheme;
 
 pub use globus_test_support::{output_dir, shared_data};
@@ -13,19 +13,9 @@ pub use globus_test_support::{output_dir, shared_data};
 /// A job with the defaults of the command line.
 pub fn job(kind: JobKind, inputs: &[PathBuf], out: &Path, scheme: TilingScheme) -> TileJob {
     TileJob {
-        kind,
-        inputs: inputs.to_vec(),
-        output: out.to_owned(),
         scheme,
-        tile_size: 256,
-        min_level: 0,
-        max_level: None,
-        bounds: None,
         threads: Some(2),
-        resume: false,
-        force: true,
-        layout: TileLayout::Xyz,
-        shard: None,
+        ..TileJob::new(kind, inputs.to_vec(), out.to_owned())
     }
 }
 
