@@ -8,14 +8,18 @@
 #   2. alps-dive in real time: the share of loaded tiles never drawn, and tiles loaded again
 #      while cached, for the real-data layers and for the procedural planet.
 # Usage: tools/stream-figures.sh [OUT_DIR] [PORT]
+# On a machine that cannot build (a lent GPU machine), set GLOBUS to a built binary and TILES
+# to the output of tools/tile-demo-data.sh made elsewhere.
 set -eu
 here=$(cd "$(dirname "$0")/.." && pwd)
 out=${1:-"$here/target/stream-figures"}
 port=${2:-8766}
-"$here/tools/tile-demo-data.sh" "$out/tiles"
-globus="$here/target/release/globus"
+mkdir -p "$out"
+tiles=${TILES:-"$out/tiles"}
+[ -n "${TILES:-}" ] || "$here/tools/tile-demo-data.sh" "$tiles"
+globus=${GLOBUS:-"$here/target/release/globus"}
 cd "$here"
-python3 "$here/tools/slow_http.py" "$out/tiles" "$port" 50 2>"$out/server.log" &
+python3 "$here/tools/slow_http.py" "$tiles" "$port" 50 2>"$out/server.log" &
 server=$!
 trap 'kill $server 2>/dev/null' EXIT INT TERM
 sleep 1

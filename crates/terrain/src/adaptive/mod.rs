@@ -26,7 +26,7 @@
 
 mod rtin;
 
-pub use rtin::Rtin;
+pub use rtin::{Rtin, RtinScratch};
 
 pub mod decimate;
 

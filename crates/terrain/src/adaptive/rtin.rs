@@ -18,18 +18,20 @@
 //! `X/s + Y/s` is even and from north-east to south-west when odd; that is what splitting
 //! B(2s) produces.
 //!
-//! **Errors.** For each triangle the build scans every grid sample it covers and takes the
-//! largest distance to the triangle's plane. The value stored at a midpoint vertex is the
-//! largest of the errors of the (one or two) triangles whose hypotenuse it splits and of the
-//! values stored at their children's midpoints. Refining every triangle whose midpoint value
-//! exceeds `max_error` then gives a conforming mesh (both triangles sharing a hypotenuse split
+//! **Errors.** For each triangle the build takes the largest distance of any grid sample it
+//! covers to the triangle's plane. The value stored at a midpoint vertex is the largest of the
+//! errors of the (one or two) triangles whose hypotenuse it splits and of the values stored at
+//! their children's midpoints. Refining every triangle whose midpoint value exceeds
+//! `max_error` then gives a conforming mesh (both triangles sharing a hypotenuse split
 //! together, and a triangle only splits when its parent did) whose error is at most
-//! `max_error`, up to f32 rounding of about 1e-4 m. The scan costs each level one pass over
-//! the grid: `2 log2(n)` passes, about 4.7 million samples for 513 x 513.
-
-use rayon::prelude::*;
+//! `max_error`, up to f32 rounding of about 1e-4 m. Each level costs about one pass over the
+//! grid (samples on a triangle's legs are left to its children, which hold them against the
+//! same line); how the passes are vectorised is in [`levels`]. Figures against martini:
+//! `tools/compare-meshers.py`, summarised in the README.
 
 use super::{AdaptiveMesh, HeightGrid};
+
+mod levels;
 
 /// A tile's RTIN hierarchy with exact errors; build once, then [`Rtin::mesh`] per bound.
 #[derive(Clone, Debug)]
@@ -42,23 +44,13 @@ pub struct Rtin {
 impl Rtin {
     /// Computes the error hierarchy of `grid`.
     pub fn new(grid: &HeightGrid) -> Self {
+        Self::build(grid, &mut RtinScratch::default())
+    }
+
+    /// Like [`Rtin::new`], with buffers kept in `scratch` for the next grid.
+    pub fn build(grid: &HeightGrid, scratch: &mut RtinScratch) -> Self {
         let side = grid.side();
-        let n = side - 1;
-        let scan = Scan::new(grid.heights(), side);
-        let mut errors = vec![0.0f32; side * side];
-        let mut s = 2;
-        while s <= n {
-            // Small levels have many tiny triangles: constant sizes let the compiler unroll
-            // their rows and drop the divisions.
-            match s {
-                2 => level::<2>(&scan, s, &mut errors),
-                4 => level::<4>(&scan, s, &mut errors),
-                8 => level::<8>(&scan, s, &mut errors),
-                16 => level::<16>(&scan, s, &mut errors),
-                _ => level::<0>(&scan, s, &mut errors),
-            }
-            s *= 2;
-        }
+        let errors = levels::errors(grid.heights(), side, &mut scratch.0);
         Self { side, errors }
     }
 
@@ -102,6 +94,11 @@ impl Rtin {
     }
 }
 
+/// Buffers [`Rtin::build`] keeps from one grid to the next (a few times the grid's size):
+/// building many tiles with one scratch per thread spares the allocations and page faults.
+#[derive(Default)]
+pub struct RtinScratch(levels::Scratch);
+
 struct MeshBuilder<'a> {
     side: usize,
     errors: &'a [f32],
@@ -134,268 +131,6 @@ impl MeshBuilder<'_> {
         }
         self.index_of[at]
     }
-}
-
-/// The grid and its transpose: a triangle on a vertical side is scanned as the same triangle
-/// on a horizontal side of the transpose, so every scan runs along long rows.
-struct Scan<'a> {
-    side: usize,
-    rows: &'a [f32],
-    columns: Vec<f32>,
-}
-
-impl<'a> Scan<'a> {
-    fn new(h: &'a [f32], side: usize) -> Self {
-        let mut columns = vec![0.0; side * side];
-        for (y, row) in h.chunks_exact(side).enumerate() {
-            for (x, &v) in row.iter().enumerate() {
-                columns[x * side + y] = v;
-            }
-        }
-        Self {
-            side,
-            rows: h,
-            columns,
-        }
-    }
-
-    /// Error of the B triangle with hypotenuse from (x, y) to (x + s, y) of `grid` and its
-    /// apex s/2 rows below (`down`) or above, leaving out the hypotenuse row itself (see
-    /// [`Scan::hypotenuse`]).
-    #[inline(always)]
-    fn side_triangle(&self, grid: &[f32], x: usize, y: usize, s: usize, down: bool) -> f32 {
-        let side = self.side;
-        let half = s / 2;
-        let ha = grid[y * side + x];
-        let hb = grid[y * side + x + s];
-        let apex_y = if down { y + half } else { y - half };
-        let hc = grid[apex_y * side + x + half];
-        let dx = (hb - ha) / s as f32;
-        // Height gained per row towards the apex, beyond the hypotenuse's own slope.
-        let per_row = (hc - (ha + hb) * 0.5) / half as f32;
-        let mut worst = 0.0f32;
-        for k in 1..half {
-            let row = if down { y + k } else { y - k };
-            let start = ha + dx * k as f32 + per_row * k as f32;
-            let at = row * side + x + k;
-            worst = worst.max(row_deviation(&grid[at..=at + s - 2 * k], start, dx));
-        }
-        worst
-    }
-
-    /// Error of the samples on the hypotenuse from (x, y) to (x + s, y) against the straight
-    /// line between its ends: part of both triangles that share it.
-    #[inline(always)]
-    fn hypotenuse(&self, grid: &[f32], x: usize, y: usize, s: usize) -> f32 {
-        let at = y * self.side + x;
-        let (ha, hb) = (grid[at], grid[at + s]);
-        row_deviation(&grid[at..=at + s], ha, (hb - ha) / s as f32)
-    }
-
-    /// Error of both halves of the s-square at (x, y), split along its NW-SE diagonal
-    /// (`nw_se`) or its NE-SW one.
-    #[inline(always)]
-    fn square(&self, x: usize, y: usize, s: usize, nw_se: bool) -> f32 {
-        let (side, h) = (self.side, self.rows);
-        let at = |dx: usize, dy: usize| h[(y + dy) * side + x + dx];
-        let (nw, ne, sw, se) = (at(0, 0), at(s, 0), at(0, s), at(s, s));
-        let inv = 1.0 / s as f32;
-        let mut worst = 0.0f32;
-        for k in 0..=s {
-            let row = (y + k) * side + x;
-            let t = k as f32;
-            if nw_se {
-                // Upper right (NW, NE, SE): x from k to s; lower left (NW, SW, SE): 0 to k.
-                let (upper_dx, upper_dy) = ((ne - nw) * inv, (se - ne) * inv);
-                let (lower_dx, lower_dy) = ((se - sw) * inv, (sw - nw) * inv);
-                let upper = nw + upper_dx * t + upper_dy * t;
-                worst = worst.max(row_deviation(&h[row + k..=row + s], upper, upper_dx));
-                worst = worst.max(row_deviation(
-                    &h[row..=row + k],
-                    nw + lower_dy * t,
-                    lower_dx,
-                ));
-            } else {
-                // Upper left (NW, NE, SW): x from 0 to s - k; lower right (NE, SW, SE): s - k to s.
-                let (upper_dx, upper_dy) = ((ne - nw) * inv, (sw - nw) * inv);
-                let (lower_dx, lower_dy) = ((se - sw) * inv, (se - ne) * inv);
-                let upper = nw + upper_dy * t;
-                worst = worst.max(row_deviation(&h[row..=row + s - k], upper, upper_dx));
-                let lower = ne + lower_dy * t - lower_dx * t;
-                worst = worst.max(row_deviation(&h[row + s - k..=row + s], lower, lower_dx));
-            }
-        }
-        worst
-    }
-}
-
-/// Both passes of level `s`: B(s), then A(s). `S` is `s` as a compile-time constant for
-/// the small levels (0 otherwise), so the closures the rows run see a constant size.
-fn level<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
-    let s = if S == 0 { s } else { S };
-    sides_pass::<S>(scan, s, errors);
-    squares_pass::<S>(scan, s, errors);
-}
-
-/// Computes `value(errors, x, y)` for `x = x0 + i * step` (`i < cols`) on every row
-/// `y = y0 + j * step` (`j < rows`), rows in parallel (they only read `errors`) into one flat
-/// buffer, then stores each at `errors[index(x, y)]`.
-#[allow(clippy::too_many_arguments)] // one call per pass; a struct would only rename them
-#[inline(always)]
-fn each_row(
-    errors: &mut [f32],
-    (y0, rows): (usize, usize),
-    (x0, cols): (usize, usize),
-    step: usize,
-    value: impl Fn(&[f32], usize, usize) -> f32 + Sync,
-    index: impl Fn(usize, usize) -> usize,
-) {
-    let mut out = vec![0.0f32; rows * cols];
-    let read: &[f32] = errors;
-    // Tasks of at least ~64k grid samples (a value scans about step^2 of them): below that,
-    // scheduling costs more than the work.
-    let min_rows = (65536 / (cols * step * step).max(1)).max(1);
-    out.par_chunks_mut(cols)
-        .with_min_len(min_rows)
-        .enumerate()
-        .for_each(|(j, row)| {
-            let y = y0 + j * step;
-            for (i, e) in row.iter_mut().enumerate() {
-                *e = value(read, x0 + i * step, y);
-            }
-        });
-    for (j, row) in out.chunks_exact(cols).enumerate() {
-        for (i, &e) in row.iter().enumerate() {
-            errors[index(x0 + i * step, y0 + j * step)] = e;
-        }
-    }
-}
-
-/// B(s): every side of every s-square; the midpoint gets the errors of the triangles on both
-/// sides of it and of their children (the A(s/2) centres beside it).
-#[inline(always)]
-fn sides_pass<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
-    let s = if S == 0 { s } else { S };
-    let side = scan.side;
-    let n = side - 1;
-    let (half, quarter) = (s / 2, s / 4);
-    let at = move |x: usize, y: usize| y * side + x;
-    if s == 2 {
-        // The only sample off the corners is the midpoint itself.
-        let h = scan.rows;
-        let horizontal = |_: &[f32], x: usize, y: usize| {
-            (h[at(x + 1, y)] - (h[at(x, y)] + h[at(x + 2, y)]) * 0.5).abs()
-        };
-        let (edges, cells) = (n / 2 + 1, n / 2);
-        each_row(errors, (0, edges), (0, cells), 2, horizontal, |x, y| {
-            at(x + 1, y)
-        });
-        let vertical = |_: &[f32], x: usize, y: usize| {
-            (h[at(x, y + 1)] - (h[at(x, y)] + h[at(x, y + 2)]) * 0.5).abs()
-        };
-        each_row(errors, (0, cells), (0, edges), 2, vertical, |x, y| {
-            at(x, y + 1)
-        });
-        return;
-    }
-    // Horizontal sides on the grid, vertical sides as horizontal sides of the transpose.
-    for (grid, transposed) in [(scan.rows, false), (&scan.columns[..], true)] {
-        let value = |errors: &[f32], x: usize, y: usize| {
-            let mut e = scan.hypotenuse(grid, x, y, s);
-            if y > 0 {
-                e = e.max(scan.side_triangle(grid, x, y, s, false));
-            }
-            if y < n {
-                e = e.max(scan.side_triangle(grid, x, y, s, true));
-            }
-            for cy in [y.wrapping_sub(quarter), y + quarter] {
-                if cy < side {
-                    for cx in [x + quarter, x + half + quarter] {
-                        let child = if transposed { at(cy, cx) } else { at(cx, cy) };
-                        e = e.max(errors[child]);
-                    }
-                }
-            }
-            e
-        };
-        let index = |x: usize, y: usize| {
-            if transposed {
-                at(y, x + half)
-            } else {
-                at(x + half, y)
-            }
-        };
-        each_row(errors, (0, n / s + 1), (0, n / s), s, value, index);
-    }
-}
-
-/// A(s): both halves of every s-square; the centre gets their errors and those of the four
-/// side midpoints (their children).
-#[inline(always)]
-fn squares_pass<const S: usize>(scan: &Scan<'_>, s: usize, errors: &mut [f32]) {
-    let s = if S == 0 { s } else { S };
-    let side = scan.side;
-    let n = side - 1;
-    let half = s / 2;
-    let at = move |x: usize, y: usize| y * side + x;
-    let h = scan.rows;
-    let value = |errors: &[f32], x: usize, y: usize| {
-        let nw_se = (x / s + y / s).is_multiple_of(2);
-        let mut e = if s == 2 {
-            // Off the corners: the centre (on the diagonal) and the side midpoints, whose
-            // errors the B(2) pass already holds.
-            let (a, b) = if nw_se {
-                (h[at(x, y)], h[at(x + 2, y + 2)])
-            } else {
-                (h[at(x + 2, y)], h[at(x, y + 2)])
-            };
-            (h[at(x + 1, y + 1)] - (a + b) * 0.5).abs()
-        } else {
-            scan.square(x, y, s, nw_se)
-        };
-        for (cx, cy) in [
-            (x + half, y),
-            (x + half, y + s),
-            (x, y + half),
-            (x + s, y + half),
-        ] {
-            e = e.max(errors[at(cx, cy)]);
-        }
-        e
-    };
-    each_row(errors, (0, n / s), (0, n / s), s, value, |x, y| {
-        at(x + half, y + half)
-    });
-}
-
-/// max |row[k] - (start + step * k)|, in lanes the compiler vectorises (compare-and-select
-/// instead of `f32::max`, whose NaN rules keep it scalar; heights are finite).
-#[inline(always)]
-fn row_deviation(row: &[f32], start: f32, step: f32) -> f32 {
-    const LANES: usize = 8;
-    const OFFSETS: [f32; LANES] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
-    let mut acc = [0.0f32; LANES];
-    let chunks = row.chunks_exact(LANES);
-    let tail = chunks.remainder();
-    let mut base = start;
-    let mut done = 0usize;
-    for chunk in chunks {
-        for k in 0..LANES {
-            let d = (chunk[k] - (base + step * OFFSETS[k])).abs();
-            acc[k] = if d > acc[k] { d } else { acc[k] };
-        }
-        done += LANES;
-        base = start + step * done as f32;
-    }
-    let mut worst = 0.0f32;
-    for (k, &v) in tail.iter().enumerate() {
-        let d = (v - (base + step * k as f32)).abs();
-        worst = if d > worst { d } else { worst };
-    }
-    for a in acc {
-        worst = if a > worst { a } else { worst };
-    }
-    worst
 }
 
 #[cfg(test)]
@@ -492,6 +227,106 @@ mod tests {
             assert!(mesh.triangles.len() >= last);
             last = mesh.triangles.len();
             assert_covers(&mesh);
+        }
+    }
+
+    /// The stored errors by definition, in f64 and by brute force: every triangle of the
+    /// hierarchy, smallest first, measured at every grid sample inside it or on its border
+    /// against the plane through its corners; the value at a hypotenuse midpoint is the
+    /// largest of its (one or two) triangles' errors and of their children's midpoints.
+    fn reference_errors(grid: &HeightGrid) -> Vec<f64> {
+        let side = grid.side();
+        let n = (side - 1) as i64;
+        let h = |x: i64, y: i64| f64::from(grid.heights()[(y * side as i64 + x) as usize]);
+        let mut triangles = Vec::new();
+        let mut stack = vec![([0, 0], [n, n], [n, 0]), ([n, n], [0, 0], [0, n])];
+        while let Some((a, b, c)) = stack.pop() {
+            if (a[0] - b[0]).abs().max((a[1] - b[1]).abs()) < 2 {
+                continue;
+            }
+            let m = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2];
+            triangles.push((a, b, c));
+            stack.push((c, a, m));
+            stack.push((b, c, m));
+        }
+        // Squared hypotenuse length: 4 for B(2), 8 for A(2), 16 for B(4), ...
+        let size = |t: &([i64; 2], [i64; 2], [i64; 2])| {
+            (t.0[0] - t.1[0]).pow(2) + (t.0[1] - t.1[1]).pow(2)
+        };
+        triangles.sort_by_key(size);
+        let mut stored = vec![0.0f64; side * side];
+        let index = |p: [i64; 2]| (p[1] * side as i64 + p[0]) as usize;
+        for (a, b, c) in triangles {
+            let det = ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])) as f64;
+            let mut own = 0.0f64;
+            for y in a[1].min(b[1]).min(c[1])..=a[1].max(b[1]).max(c[1]) {
+                for x in a[0].min(b[0]).min(c[0])..=a[0].max(b[0]).max(c[0]) {
+                    let wb = ((x - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (y - a[1])) as f64 / det;
+                    let wc = ((b[0] - a[0]) * (y - a[1]) - (x - a[0]) * (b[1] - a[1])) as f64 / det;
+                    let wa = 1.0 - wb - wc;
+                    if wa < -1e-9 || wb < -1e-9 || wc < -1e-9 {
+                        continue;
+                    }
+                    let plane = wa * h(a[0], a[1]) + wb * h(b[0], b[1]) + wc * h(c[0], c[1]);
+                    own = own.max((h(x, y) - plane).abs());
+                }
+            }
+            let m = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2];
+            let mut value = own;
+            if size(&(a, b, c)) > 4 {
+                for child in [
+                    [(c[0] + a[0]) / 2, (c[1] + a[1]) / 2],
+                    [(b[0] + c[0]) / 2, (b[1] + c[1]) / 2],
+                ] {
+                    value = value.max(stored[index(child)]);
+                }
+            }
+            stored[index(m)] = stored[index(m)].max(value);
+        }
+        stored
+    }
+
+    /// The fast passes (directly, across squares, along rows) against the definition, on
+    /// grids from 3 x 3 to 129 x 129: every stored value equal up to f32 rounding. Larger
+    /// or smaller values would both be wrong: too large adds triangles, too small breaks
+    /// the bound.
+    #[test]
+    fn stored_errors_match_the_definition() {
+        let grids = [
+            random(1, 3, 50.0),
+            random(2, 5, 50.0),
+            random(4, 7, 300.0),
+            rough(33, 9, 1500.0),
+            random(6, 11, 800.0),
+            rough(129, 13, 2500.0),
+        ];
+        for grid in grids {
+            let reference = reference_errors(&grid);
+            let errors = Rtin::new(&grid).errors().to_vec();
+            let side = grid.side();
+            for (i, (&got, &want)) in errors.iter().zip(&reference).enumerate() {
+                assert!(
+                    (f64::from(got) - want).abs() <= 2e-3,
+                    "side {side}: sample ({}, {}) stores {got}, the definition gives {want}",
+                    i % side,
+                    i / side
+                );
+            }
+        }
+    }
+
+    /// A scratch carried from grid to grid (of other sizes too) changes nothing.
+    #[test]
+    fn reused_scratch_gives_the_same_errors() {
+        let mut scratch = RtinScratch::default();
+        for grid in [
+            rough(129, 1, 900.0),
+            rough(129, 2, 40.0),
+            random(3, 4, 80.0),
+            rough(129, 5, 2000.0),
+        ] {
+            let reused = Rtin::build(&grid, &mut scratch);
+            assert_eq!(reused.errors(), Rtin::new(&grid).errors());
         }
     }
 

@@ -1,0 +1,598 @@
+//! The per-level error passes of [`super::Rtin::new`]: [`errors`].
+//!
+//! At level `s` every s-square is cut into the two A(s) triangles of its diagonal and into the
+//! four B(s) triangles around its centre (one per side, the side as hypotenuse). A pass
+//! computes, per square, the largest distance of a grid sample to the plane of the triangle
+//! holding it: for both A halves together, and for each B triangle ([`Scratch`]); [`combine`]
+//! then stores the values at the midpoints, with their children's.
+//!
+//! A sample on a triangle's legs need not be measured against that triangle: its legs are the
+//! hypotenuses of its children, whose stored values already hold those samples against the
+//! same line. So an A(s) square is measured at its interior samples (its diagonal included,
+//! its sides left out) and a B(s) triangle at its interior and its hypotenuse (the square's
+//! diagonals left out).
+//!
+//! Three ways to run a pass, by level:
+//! * [`level_two`]: a B(2) triangle holds one sample besides its corners, an A(2) square one
+//!   more; computed directly on the grid rows.
+//! * [`across_squares`] for small squares, whose rows are too short to vectorise along: the
+//!   loop runs over every other square of a square row at once, sample `(i, j)` of each
+//!   square read from one contiguous array (the rows regrouped by `x mod 2s`, [`Phased`]).
+//! * [`along_rows`] for large squares: each triangle's rows scanned in SIMD lanes.
+
+use rayon::prelude::*;
+
+/// Levels up to this square size are computed across squares, larger ones, whose triangles
+/// have long rows, along rows.
+const ACROSS_SQUARES_UP_TO: usize = 16;
+
+/// The refinement error stored at every sample of the `side` x `side` grid `h` (0 at the
+/// tile's corners): level by level from the smallest squares up.
+pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch) -> Vec<f32> {
+    let n = side - 1;
+    let mut errors = vec![0.0f32; side * side];
+    level_two(h, side, &mut errors);
+    scratch.transposed = false;
+    scratch.phased.data.clear();
+    let mut s = 4;
+    while s <= n {
+        match s {
+            _ if s == n || s > ACROSS_SQUARES_UP_TO => along_rows(h, side, s, scratch),
+            4 => across_squares::<4>(h, side, s, scratch),
+            8 => across_squares::<8>(h, side, s, scratch),
+            16 => across_squares::<16>(h, side, s, scratch),
+            _ => across_squares::<0>(h, side, s, scratch),
+        }
+        combine(&mut errors, scratch, side, s);
+        s *= 2;
+    }
+    errors
+}
+
+/// Per-square errors of one level and the buffers reused from level to level (fresh ones
+/// would cost page faults every level).
+#[derive(Default)]
+pub(super) struct Scratch {
+    /// The grid regrouped for [`across_squares`], once filled.
+    phased: Phased,
+    /// The grid transposed, for [`along_rows`], once `transposed`.
+    columns: Vec<f32>,
+    transposed: bool,
+    /// Per square, row-major: both A(s) halves.
+    a: Vec<f32>,
+    /// Per square: the B(s) triangles north, south, west and east of its centre.
+    b: Vec<[f32; 4]>,
+}
+
+impl Scratch {
+    fn prepare(&mut self, squares: usize) {
+        self.a.clear();
+        self.a.resize(squares * squares, 0.0);
+        self.b.clear();
+        self.b.resize(squares * squares, [0.0; 4]);
+    }
+}
+
+const NORTH: usize = 0;
+const SOUTH: usize = 1;
+const WEST: usize = 2;
+const EAST: usize = 3;
+
+/// Square rows per parallel task: enough for about 64k samples, below which scheduling
+/// costs more than the work.
+fn min_rows(squares: usize, s: usize) -> usize {
+    (65536 / (squares * s * s).max(1)).max(1)
+}
+
+/// The grid's rows regrouped by a period `P` (twice the largest square computed across
+/// squares): sample `x = P q + i` of row `y` is stored at phase `i` (`0 <= i < P`), position
+/// `q`. The squares of size `s` at `x = P q + first` (`first` a multiple of `s` below `P`)
+/// are one set, and sample `(i, j)` of every square of a set is one contiguous run.
+#[derive(Default)]
+struct Phased {
+    /// Positions per phase carrying squares, `n / P`.
+    runs: usize,
+    /// Floats per phase: `runs + 1` (phase 0 holds the row's last sample too).
+    len: usize,
+    /// `P`.
+    period: usize,
+    data: Vec<f32>,
+}
+
+impl Phased {
+    fn fill(&mut self, h: &[f32], side: usize, period: usize) {
+        self.period = period;
+        self.runs = (side - 1) / period;
+        self.len = self.runs + 1;
+        let row_len = period * self.len;
+        self.data.resize(side * row_len, 0.0);
+        for (row, out) in h
+            .chunks_exact(side)
+            .zip(self.data.chunks_exact_mut(row_len))
+        {
+            // Phase by phase: contiguous writes, reads striding through one cached row.
+            for (i, phase) in out.chunks_exact_mut(self.len).enumerate() {
+                for (o, &v) in phase.iter_mut().zip(row[i..].iter().step_by(period)) {
+                    *o = v;
+                }
+            }
+        }
+    }
+
+    /// `h[y][P q + i]` for `q < runs`, `0 <= i <= P`.
+    #[inline(always)]
+    fn column(&self, y: usize, i: usize) -> &[f32] {
+        let row_len = self.period * self.len;
+        let row = &self.data[y * row_len..(y + 1) * row_len];
+        if i == self.period {
+            &row[1..self.len]
+        } else {
+            &row[i * self.len..i * self.len + self.runs]
+        }
+    }
+}
+
+/// Heights of one set of squares of a square row, relative to their north-west corners.
+struct Corners {
+    nw: Vec<f32>,
+    ne: Vec<f32>,
+    sw: Vec<f32>,
+    se: Vec<f32>,
+    centre: Vec<f32>,
+}
+
+impl Corners {
+    fn new(runs: usize) -> Self {
+        let zeros = || vec![0.0f32; runs];
+        Self {
+            nw: zeros(),
+            ne: zeros(),
+            sw: zeros(),
+            se: zeros(),
+            centre: zeros(),
+        }
+    }
+
+    /// The set of s-squares at `x = P q + first` and `y`.
+    fn load(&mut self, grid: &Phased, y: usize, first: usize, s: usize) {
+        let half = s / 2;
+        self.nw.copy_from_slice(grid.column(y, first));
+        let nw = &self.nw;
+        let relative = |out: &mut Vec<f32>, from: &[f32]| {
+            for ((o, &v), &base) in out.iter_mut().zip(from).zip(nw) {
+                *o = v - base;
+            }
+        };
+        relative(&mut self.ne, grid.column(y, first + s));
+        relative(&mut self.sw, grid.column(y + s, first));
+        relative(&mut self.se, grid.column(y + s, first + s));
+        relative(&mut self.centre, grid.column(y + half, first + half));
+    }
+}
+
+/// `acc[p] = max(acc[p], |h[p] - nw[p] - (wa a[p] + wb b[p] + wc c[p])|)`: the distance of
+/// one sample of every square to a plane through the square's corners, in SIMD lanes
+/// (compare-and-select, not `f32::max`, whose NaN rules keep it scalar; heights are finite).
+#[inline(always)]
+fn accumulate(acc: &mut [f32], h: &[f32], nw: &[f32], terms: [(f32, &[f32]); 3]) {
+    let n = acc.len();
+    let [(wa, a), (wb, b), (wc, c)] = terms;
+    let (h, nw, a, b, c) = (&h[..n], &nw[..n], &a[..n], &b[..n], &c[..n]);
+    for p in 0..n {
+        let d = ((h[p] - nw[p]) - (wa * a[p] + wb * b[p] + wc * c[p])).abs();
+        acc[p] = larger(acc[p], d);
+    }
+}
+
+/// Errors of one set of squares of a square row: both A(s) halves together and the four B(s)
+/// triangles.
+struct RowErrors {
+    a: Vec<f32>,
+    b: [Vec<f32>; 4],
+}
+
+/// Computes the A(s) and B(s) errors of the set of squares at `x = P q + first` of square row
+/// `y`; `nw_se` is their diagonal.
+fn square_row(
+    grid: &Phased,
+    corners: &mut Corners,
+    out: &mut RowErrors,
+    (y, first, nw_se): (usize, usize, bool),
+    s: usize,
+) {
+    corners.load(grid, y, first, s);
+    let Corners {
+        nw,
+        ne,
+        sw,
+        se,
+        centre,
+    } = &*corners;
+    let (ne, sw, se, c) = (&ne[..], &sw[..], &se[..], &centre[..]);
+    out.a.fill(0.0);
+    for b in &mut out.b {
+        b.fill(0.0);
+    }
+    let inv = 1.0 / s as f32;
+    for j in 0..=s {
+        let v = j as f32 * inv;
+        for i in 0..=s {
+            let u = i as f32 * inv;
+            let on_side = i == 0 || i == s || j == 0 || j == s;
+            let on_diagonal = i == j || i + j == s;
+            if on_side && on_diagonal {
+                continue; // a corner: on every plane
+            }
+            let h = grid.column(y + j, first + i);
+            if !on_side {
+                // A(s): plane - nw = alpha (ne - nw) + beta (sw - nw) + gamma (se - nw).
+                let a_terms = if nw_se {
+                    if i >= j {
+                        [(u - v, ne), (0.0, sw), (v, se)]
+                    } else {
+                        [(0.0, ne), (v - u, sw), (u, se)]
+                    }
+                } else if i + j <= s {
+                    [(u, ne), (v, sw), (0.0, se)]
+                } else {
+                    [(1.0 - v, ne), (1.0 - u, sw), (u + v - 1.0, se)]
+                };
+                accumulate(&mut out.a, h, nw, a_terms);
+            }
+            if on_diagonal {
+                continue;
+            }
+            // B(s): the one triangle around the centre that holds (i, j).
+            let (which, terms) = if j < i && j < s - i {
+                (NORTH, [(u - v, ne), (2.0 * v, c), (0.0, se)])
+            } else if j > i && j > s - i {
+                (SOUTH, [(v - u, sw), (u + v - 1.0, se), (2.0 - 2.0 * v, c)])
+            } else if i < j {
+                (WEST, [(v - u, sw), (2.0 * u, c), (0.0, se)])
+            } else {
+                (EAST, [(u - v, ne), (u + v - 1.0, se), (2.0 - 2.0 * u, c)])
+            };
+            accumulate(&mut out.b[which], h, nw, terms);
+        }
+    }
+}
+
+/// Level 2, directly on the grid: a B(2) triangle holds one sample off its corners, the
+/// midpoint of its hypotenuse, and an A(2) square one more, its centre.
+pub(super) fn level_two(h: &[f32], side: usize, errors: &mut [f32]) {
+    let n = side - 1;
+    let mut line = vec![0.0f32; side];
+    for y in 0..side {
+        let row = &h[y * side..(y + 1) * side];
+        let out = &mut errors[y * side..(y + 1) * side];
+        if y % 2 == 0 {
+            // Midpoints of horizontal sides (odd x) against their side.
+            for (l, w) in line[1..n].iter_mut().zip(row.windows(3)) {
+                *l = (w[1] - (w[0] + w[2]) * 0.5).abs();
+            }
+            for x in (1..n).step_by(2) {
+                out[x] = line[x];
+            }
+        } else {
+            // Midpoints of vertical sides (even x) against their side; odd x are A(2)
+            // centres, set below.
+            let (above, below) = (
+                &h[(y - 1) * side..y * side],
+                &h[(y + 1) * side..(y + 2) * side],
+            );
+            for (((e, &c), &a), &b) in out.iter_mut().zip(row).zip(above).zip(below) {
+                *e = (c - (a + b) * 0.5).abs();
+            }
+        }
+    }
+    for y in (1..n).step_by(2) {
+        for x in (1..n).step_by(2) {
+            let at = y * side + x;
+            let nw_se = ((x / 2) + (y / 2)).is_multiple_of(2);
+            let (a, b) = if nw_se {
+                (h[at - side - 1], h[at + side + 1])
+            } else {
+                (h[at - side + 1], h[at + side - 1])
+            };
+            let mut e = (h[at] - (a + b) * 0.5).abs();
+            for child in [at - 1, at + 1, at - side, at + side] {
+                e = larger(e, errors[child]);
+            }
+            errors[at] = e;
+        }
+    }
+}
+
+/// Per-square errors of level `s` (`4 <= s < n`) across squares. `S` is `s` as a
+/// compile-time constant for the smallest levels (0 otherwise), so their loops unroll.
+pub(super) fn across_squares<const S: usize>(
+    h: &[f32],
+    side: usize,
+    s: usize,
+    scratch: &mut Scratch,
+) {
+    let s = if S == 0 { s } else { S };
+    let squares = (side - 1) / s;
+    if scratch.phased.data.is_empty() {
+        let period = (2 * ACROSS_SQUARES_UP_TO).min(side - 1);
+        scratch.phased.fill(h, side, period);
+    }
+    scratch.prepare(squares);
+    let grid = &scratch.phased;
+    let (runs, sets) = (grid.runs, grid.period / s);
+    scratch
+        .a
+        .par_chunks_mut(squares)
+        .zip(scratch.b.par_chunks_mut(squares))
+        .enumerate()
+        .with_min_len(min_rows(squares, s))
+        .for_each_init(
+            || {
+                let zeros = || vec![0.0f32; runs];
+                (
+                    Corners::new(runs),
+                    RowErrors {
+                        a: zeros(),
+                        b: [zeros(), zeros(), zeros(), zeros()],
+                    },
+                )
+            },
+            |(corners, row), (row_index, (a_out, b_out))| {
+                for set in 0..sets {
+                    // Sets alternate diagonals, as squares do (`sets` is even).
+                    let nw_se = (row_index + set).is_multiple_of(2);
+                    square_row(grid, corners, row, (row_index * s, set * s, nw_se), s);
+                    for q in 0..runs {
+                        let k = sets * q + set;
+                        a_out[k] = row.a[q];
+                        b_out[k] = [
+                            row.b[NORTH][q],
+                            row.b[SOUTH][q],
+                            row.b[WEST][q],
+                            row.b[EAST][q],
+                        ];
+                    }
+                }
+            },
+        );
+}
+
+/// Per-square errors of level `s` along rows: A halves and the north and south B triangles
+/// on the grid, the west and east ones as north and south of the transposed grid, so every
+/// triangle is scanned along its long rows.
+pub(super) fn along_rows(h: &[f32], side: usize, s: usize, scratch: &mut Scratch) {
+    let squares = (side - 1) / s;
+    if !scratch.transposed {
+        transpose(h, side, &mut scratch.columns);
+        scratch.transposed = true;
+    }
+    scratch.prepare(squares);
+    let columns = &scratch.columns[..];
+    scratch
+        .a
+        .par_chunks_mut(squares)
+        .zip(scratch.b.par_chunks_mut(squares))
+        .enumerate()
+        .with_min_len(min_rows(squares, s))
+        .for_each(|(row_index, (a_out, b_out))| {
+            let y = row_index * s;
+            for (col, (a, b)) in a_out.iter_mut().zip(b_out.iter_mut()).enumerate() {
+                let x = col * s;
+                let nw_se = (row_index + col).is_multiple_of(2);
+                *a = halves(h, side, (x, y), s, nw_se);
+                let [north, south] = north_south(h, side, (x, y), s);
+                let [west, east] = north_south(columns, side, (y, x), s);
+                *b = [north, south, west, east];
+            }
+        });
+}
+
+/// Writes `h` transposed into `columns`, in 16 x 16 blocks so reads and writes both stay in
+/// cache.
+fn transpose(h: &[f32], side: usize, columns: &mut Vec<f32>) {
+    const BLOCK: usize = 16;
+    columns.resize(side * side, 0.0);
+    for y0 in (0..side).step_by(BLOCK) {
+        for x0 in (0..side).step_by(BLOCK) {
+            for y in y0..(y0 + BLOCK).min(side) {
+                let row = &h[y * side..(y + 1) * side];
+                for x in x0..(x0 + BLOCK).min(side) {
+                    columns[x * side + y] = row[x];
+                }
+            }
+        }
+    }
+}
+
+/// A plane over a square as its value at `(0, k)` and its slopes: `p0 + gx i + gy k`.
+#[derive(Clone, Copy)]
+struct Plane {
+    p0: f32,
+    gx: f32,
+    gy: f32,
+}
+
+impl Plane {
+    /// `max |h - plane|` over columns `i0..=i1` of the square's row `k`.
+    #[inline(always)]
+    fn deviation(self, row: &[f32], k: usize, (i0, i1): (usize, usize)) -> f32 {
+        let start = self.p0 + self.gy * k as f32 + self.gx * i0 as f32;
+        row_deviation(&row[i0..=i1], start, self.gx)
+    }
+}
+
+/// Corner heights of the s-square at `(x, y)`: NW, NE, SW, SE, centre.
+#[inline(always)]
+fn corners(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32; 5] {
+    let at = |i: usize, k: usize| h[(y + k) * side + x + i];
+    [at(0, 0), at(s, 0), at(0, s), at(s, s), at(s / 2, s / 2)]
+}
+
+/// The A(s) error of the s-square at `(x, y)`, both halves, over its interior rows.
+fn halves(h: &[f32], side: usize, (x, y): (usize, usize), s: usize, nw_se: bool) -> f32 {
+    let [nw, ne, sw, se, _] = corners(h, side, (x, y), s);
+    let inv = 1.0 / s as f32;
+    let plane = |p0, gx, gy| Plane { p0, gx, gy };
+    // With the NW-SE diagonal, lower left (NW, SW, SE) then upper right (NW, NE, SE); with
+    // the NE-SW one, upper left (NW, NE, SW) then lower right (NE, SW, SE).
+    let (first, second) = if nw_se {
+        (
+            plane(nw, (se - sw) * inv, (sw - nw) * inv),
+            plane(nw, (ne - nw) * inv, (se - ne) * inv),
+        )
+    } else {
+        (
+            plane(nw, (ne - nw) * inv, (sw - nw) * inv),
+            plane(sw + ne - se, (se - sw) * inv, (se - ne) * inv),
+        )
+    };
+    let mut worst = 0.0f32;
+    for k in 1..s {
+        let row = &h[(y + k) * side + x..=(y + k) * side + x + s];
+        // The diagonal sample belongs to both halves.
+        let cut = if nw_se { k } else { s - k };
+        worst = larger(worst, first.deviation(row, k, (1, cut)));
+        worst = larger(worst, second.deviation(row, k, (cut, s - 1)));
+    }
+    worst
+}
+
+/// The errors of the B(s) triangles on the north and south sides of the s-square at
+/// `(x, y)`, over their hypotenuse and interior.
+fn north_south(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32; 2] {
+    let [nw, ne, sw, se, c] = corners(h, side, (x, y), s);
+    let (inv, half) = (1.0 / s as f32, s / 2);
+    let north = Plane {
+        p0: nw,
+        gx: (ne - nw) * inv,
+        gy: (2.0 * c - nw - ne) * inv,
+    };
+    let south = Plane {
+        p0: 2.0 * c - se,
+        gx: (se - sw) * inv,
+        gy: (sw + se - 2.0 * c) * inv,
+    };
+    let row = |k: usize| &h[(y + k) * side + x..=(y + k) * side + x + s];
+    let (mut n, mut so) = (0.0f32, 0.0f32);
+    for k in 0..half {
+        n = larger(n, north.deviation(row(k), k, (k + 1, s - k - 1)));
+        let k = s - k;
+        so = larger(so, south.deviation(row(k), k, (s - k + 1, k - 1)));
+    }
+    [n, so]
+}
+
+/// Stores level `s` from the per-square errors: B(s) values at the side midpoints, then A(s)
+/// values at the square centres, each with its children's values.
+pub(super) fn combine(errors: &mut [f32], scratch: &Scratch, side: usize, s: usize) {
+    let (a, b) = (&scratch.a, &scratch.b);
+    let squares = (side - 1) / s;
+    let (half, quarter) = (s / 2, s / 4);
+    let at = |x: usize, y: usize| y * side + x;
+    let square = |col: usize, row: usize| row * squares + col;
+    // B(s): horizontal sides get the south triangle of the square above and the north one of
+    // the square below; vertical sides the east one of the square left and the west one of
+    // the square right; then their children, the A(s/2) centres beside the midpoint.
+    for row in 0..=squares {
+        let y = row * s;
+        for col in 0..squares {
+            let x = col * s;
+            let mut e = 0.0f32;
+            if row > 0 {
+                e = larger(e, b[square(col, row - 1)][SOUTH]);
+            }
+            if row < squares {
+                e = larger(e, b[square(col, row)][NORTH]);
+            }
+            if quarter > 0 {
+                for cx in [x + quarter, x + half + quarter] {
+                    if row > 0 {
+                        e = larger(e, errors[at(cx, y - quarter)]);
+                    }
+                    if row < squares {
+                        e = larger(e, errors[at(cx, y + quarter)]);
+                    }
+                }
+            }
+            errors[at(x + half, y)] = e;
+        }
+    }
+    for row in 0..squares {
+        let y = row * s;
+        for col in 0..=squares {
+            let x = col * s;
+            let mut e = 0.0f32;
+            if col > 0 {
+                e = larger(e, b[square(col - 1, row)][EAST]);
+            }
+            if col < squares {
+                e = larger(e, b[square(col, row)][WEST]);
+            }
+            if quarter > 0 {
+                for cy in [y + quarter, y + half + quarter] {
+                    if col > 0 {
+                        e = larger(e, errors[at(x - quarter, cy)]);
+                    }
+                    if col < squares {
+                        e = larger(e, errors[at(x + quarter, cy)]);
+                    }
+                }
+            }
+            errors[at(x, y + half)] = e;
+        }
+    }
+    // A(s): the centre gets both halves and its four side midpoints (the B(s) just stored).
+    for row in 0..squares {
+        let y = row * s;
+        for col in 0..squares {
+            let x = col * s;
+            let mut e = a[square(col, row)];
+            for (cx, cy) in [
+                (x + half, y),
+                (x + half, y + s),
+                (x, y + half),
+                (x + s, y + half),
+            ] {
+                e = larger(e, errors[at(cx, cy)]);
+            }
+            errors[at(x + half, y + half)] = e;
+        }
+    }
+}
+
+/// The larger of two finite values: compare-and-select, cheaper than `f32::max` and its NaN
+/// rules.
+#[inline(always)]
+fn larger(a: f32, b: f32) -> f32 {
+    if b > a { b } else { a }
+}
+
+/// max |row[k] - (start + step * k)|, in lanes the compiler vectorises (compare-and-select
+/// instead of `f32::max`, whose NaN rules keep it scalar; heights are finite).
+#[inline(always)]
+fn row_deviation(row: &[f32], start: f32, step: f32) -> f32 {
+    const LANES: usize = 8;
+    const OFFSETS: [f32; LANES] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+    let mut acc = [0.0f32; LANES];
+    let chunks = row.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    let mut base = start;
+    let mut done = 0usize;
+    for chunk in chunks {
+        for k in 0..LANES {
+            let d = (chunk[k] - (base + step * OFFSETS[k])).abs();
+            acc[k] = larger(acc[k], d);
+        }
+        done += LANES;
+        base = start + step * done as f32;
+    }
+    let mut worst = 0.0f32;
+    for (k, &v) in tail.iter().enumerate() {
+        let d = (v - (base + step * k as f32)).abs();
+        worst = larger(worst, d);
+    }
+    for a in acc {
+        worst = larger(worst, a);
+    }
+    worst
+}
