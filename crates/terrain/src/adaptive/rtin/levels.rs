@@ -16,8 +16,9 @@
 //! * [`level_two`]: a B(2) triangle holds one sample besides its corners, an A(2) square one
 //!   more; computed directly on the grid rows.
 //! * [`across_squares`] for small squares, whose rows are too short to vectorise along: the
-//!   loop runs over every other square of a square row at once, sample `(i, j)` of each
-//!   square read from one contiguous array (the rows regrouped by `x mod 2s`, [`Phased`]).
+//!   loop runs over one set of squares of a square row at once (every `2 * 16 / s`-th square),
+//!   sample `(i, j)` of each read from one contiguous array (the rows regrouped by `x mod 32`,
+//!   [`Phased`]).
 //! * [`along_rows`] for large squares: each triangle's rows scanned in SIMD lanes.
 
 use rayon::prelude::*;
@@ -36,12 +37,10 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch) -> Vec<f32> 
     scratch.phased.data.clear();
     let mut s = 4;
     while s <= n {
-        match s {
-            _ if s == n || s > ACROSS_SQUARES_UP_TO => along_rows(h, side, s, scratch),
-            4 => across_squares::<4>(h, side, s, scratch),
-            8 => across_squares::<8>(h, side, s, scratch),
-            16 => across_squares::<16>(h, side, s, scratch),
-            _ => across_squares::<0>(h, side, s, scratch),
+        if s == n || s > ACROSS_SQUARES_UP_TO {
+            along_rows(h, side, s, scratch);
+        } else {
+            across_squares(h, side, s, scratch);
         }
         combine(&mut errors, scratch, side, s);
         s *= 2;
@@ -303,15 +302,8 @@ pub(super) fn level_two(h: &[f32], side: usize, errors: &mut [f32]) {
     }
 }
 
-/// Per-square errors of level `s` (`4 <= s < n`) across squares. `S` is `s` as a
-/// compile-time constant for the smallest levels (0 otherwise), so their loops unroll.
-pub(super) fn across_squares<const S: usize>(
-    h: &[f32],
-    side: usize,
-    s: usize,
-    scratch: &mut Scratch,
-) {
-    let s = if S == 0 { s } else { S };
+/// Per-square errors of level `s` (`4 <= s < n`) across squares.
+pub(super) fn across_squares(h: &[f32], side: usize, s: usize, scratch: &mut Scratch) {
     let squares = (side - 1) / s;
     if scratch.phased.data.is_empty() {
         let period = (2 * ACROSS_SQUARES_UP_TO).min(side - 1);
