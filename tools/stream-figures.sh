@@ -54,5 +54,7 @@ for name in ("alps-real", "alps-procedural"):
           f"({100 * d['loaded_never_drawn_fraction']:.1f} %); from fetched data {d['fetched']}, "
           f"never drawn {d['fetched_never_drawn']} ({100 * d['fetched_never_drawn_fraction']:.1f} %); "
           f"loaded again while cached {d['loaded_again_while_cached']}, "
-          f"stopped in flight {d['loads_stopped_in_flight']}")
+          f"stopped in flight {d['loads_stopped_in_flight']}, "
+          f"requests deferred while moving {d['requests_deferred_while_moving']}, "
+          f"frames with every wanted tile drawn {100 * d['complete_frames_fraction']:.1f} %")
 EOF

@@ -8,6 +8,7 @@
 //! gpu_tiles = 1024          # tile slots in the GPU pools
 //! workers = 16              # loader threads (also the most requests in flight)
 //! refine_to_level = 22      # procedural detail below the data, down to this level
+//! request_lookahead_frames = 3  # a moving camera skips tiles it leaves within 3 frames
 //!
 //! [http]
 //! user_agent = "my-app/1.0 (me@example.org)"
@@ -55,6 +56,9 @@ pub struct Config {
     pub workers: Option<usize>,
     /// Deepest level procedural refinement goes to.
     pub refine_to_level: Option<u8>,
+    /// Frames ahead a moving camera's requests look
+    /// ([`GlobeOptions::request_lookahead_frames`]).
+    pub request_lookahead_frames: Option<f64>,
     /// HTTP settings.
     pub http: Option<HttpConfig>,
     /// On-disk tile cache.
@@ -132,6 +136,11 @@ impl Config {
         {
             bail!("refine_to_level = {l} is deeper than the deepest level, 29");
         }
+        if let Some(f) = self.request_lookahead_frames
+            && !(0.0..=1000.0).contains(&f)
+        {
+            bail!("request_lookahead_frames = {f} must be from 0 to 1000 frames");
+        }
         if let Some(d) = &self.disk_cache
             && d.max_mb == Some(0)
         {
@@ -166,6 +175,9 @@ impl Config {
         }
         if let Some(l) = self.refine_to_level {
             options.max_level = l;
+        }
+        if let Some(f) = self.request_lookahead_frames {
+            options.request_lookahead_frames = f;
         }
         if let Some(h) = &self.http {
             if let Some(ua) = &h.user_agent {
@@ -213,6 +225,7 @@ mod tests {
             gpu_tiles = 512
             workers = 12
             refine_to_level = 22
+            request_lookahead_frames = 0
             [http]
             user_agent = "test/1"
             per_host = 4
@@ -235,6 +248,7 @@ mod tests {
         assert_eq!(o.max_sse_px, 3.5);
         assert_eq!(o.cache_bytes, 256 << 20);
         assert_eq!((o.gpu_slots, o.workers, o.max_level), (512, 12, 22));
+        assert_eq!(o.request_lookahead_frames, 0.0);
         assert_eq!(o.http.user_agent, "test/1");
         assert_eq!(o.http.per_host, 4);
         assert_eq!(o.http.read_timeout, Duration::from_secs(7));
@@ -262,6 +276,8 @@ mod tests {
             "[[terrain]]\nurl = 'x'\nencodin = 'terrarium'",
             "[disk_cache]\ndir = '/tmp'\nmax_mb = 0",
             "refine_to_level = 40",
+            "request_lookahead_frames = -1",
+            "request_lookahead_frames = nan",
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }

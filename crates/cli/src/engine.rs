@@ -16,7 +16,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use globus_geo::{Cartographic, Ellipsoid, View};
+use globus_geo::{Cartographic, DVec3, Ellipsoid, Frustum, Intersection, View};
 use globus_render::{
     DrawStats, FrameInputs, GlobeRenderer, Lighting, PoolStats, TilePool, TilePoolOptions,
     near_plane_m,
@@ -32,7 +32,8 @@ use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
 use globus_terrain::refine::RefineOptions;
 use globus_tiling::{
-    Selection, SelectionOptions, SelectionStats, TileKey, TileRequest, TilingScheme, select_into,
+    Selection, SelectionOptions, SelectionStats, TileKey, TileOracle, TileRequest, TilingScheme,
+    select_into,
 };
 
 /// The default planet: seed 24 has about a third land and a mountain range at 46 N 7.6 E,
@@ -69,6 +70,11 @@ pub struct GlobeOptions {
     pub http: HttpOptions,
     /// An on-disk cache for tiles from services (none by default).
     pub disk_cache: Option<DiskCacheOptions>,
+    /// Requests culled while moving: a wanted tile outside the view the camera will have
+    /// after this many more frames at its current velocity is not requested while a loaded
+    /// ancestor can stand in for it, since it would most likely arrive after the view left
+    /// it. 0 requests everything. Cesium's `cullRequestsWhileMoving` serves the same end.
+    pub request_lookahead_frames: f64,
 }
 
 impl Default for GlobeOptions {
@@ -87,6 +93,7 @@ impl Default for GlobeOptions {
             imagery: Vec::new(),
             http: HttpOptions::default(),
             disk_cache: None,
+            request_lookahead_frames: REQUEST_LOOKAHEAD_FRAMES,
         }
     }
 }
@@ -101,6 +108,9 @@ impl GlobeOptions {
 /// Heights a real Earth's tiles may have before they are loaded (the deepest trench to above
 /// the highest peak): bounds unloaded tiles and places the horizon-culling body.
 const EARTH_HEIGHT_RANGE_M: (f64, f64) = (-11_000.0, 9_000.0);
+
+/// Default of [`Globe::request_lookahead_frames`].
+const REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
 
 /// The terrain source `options` describe: the procedural planet (optionally cut at a level
 /// and refined below), or real elevation and imagery layers refined below their data.
@@ -179,6 +189,9 @@ pub struct FrameReport {
     pub draw: DrawStats,
     /// The screen-space error bound used this frame (raised when budgets bind).
     pub sse_bound_px: f64,
+    /// Wanted tiles not requested because the moving camera will have left them behind
+    /// ([`Globe::request_lookahead_frames`]).
+    pub requests_deferred: u32,
 }
 
 /// The procedural planet, its data layer and its renderer.
@@ -193,6 +206,10 @@ pub struct Globe {
     pub lighting: Option<Lighting>,
     /// Whether the error bound may come back down after budgets forced it up.
     pub relax_detail: bool,
+    /// See [`GlobeOptions::request_lookahead_frames`]; may be changed between frames.
+    pub request_lookahead_frames: f64,
+    /// The eye position of the previous frame.
+    last_eye: Option<DVec3>,
 }
 
 impl Globe {
@@ -253,6 +270,8 @@ impl Globe {
             selection: Selection::default(),
             lighting: None,
             relax_detail: true,
+            request_lookahead_frames: options.request_lookahead_frames,
+            last_eye: None,
         }
     }
 
@@ -331,12 +350,26 @@ impl Globe {
         let select_us = started.elapsed().as_secs_f64() * 1e6;
         let select_cpu_us = started_cpu.map_or(f64::NAN, |t| t.elapsed().as_secs_f64() * 1e6);
 
-        // Wanted tiles already on the CPU go to the GPU; the rest to the loaders.
-        let (to_upload, to_load): (Vec<TileRequest>, Vec<TileRequest>) = self
+        // Wanted tiles already on the CPU go to the GPU; the rest to the loaders, unless the
+        // camera is moving away from them.
+        let (to_upload, mut to_load): (Vec<TileRequest>, Vec<TileRequest>) = self
             .selection
             .requests
             .iter()
             .partition(|r| self.layer.get(r.key).is_some());
+        let last_eye = self.last_eye.replace(view.position);
+        let requests_deferred = defer_requests_left_behind(
+            &self.layer,
+            view,
+            last_eye,
+            self.request_lookahead_frames,
+            self.options.near_m,
+            |key| {
+                std::iter::successors(key.parent(), |k| k.parent())
+                    .any(|k| self.layer.get(k).is_some())
+            },
+            &mut to_load,
+        );
         let layer_stats = self.layer.update(&self.selection.draw, &to_load);
         for d in &self.selection.draw {
             let mut key = Some(d.key);
@@ -393,6 +426,7 @@ impl Globe {
             pool: self.renderer.pool.stats(),
             draw,
             sse_bound_px: self.options.max_sse_px,
+            requests_deferred,
         }
     }
 
@@ -531,5 +565,108 @@ impl CameraSpec {
             width,
             height,
         )
+    }
+}
+
+/// Drops from `to_load` the tiles outside the view predicted `lookahead_frames` frames ahead
+/// (same orientation, the eye moved on at its velocity since `last_eye`) whose place a loaded
+/// ancestor can take meanwhile (`covered`), so no hole opens; returns how many.
+fn defer_requests_left_behind(
+    layer: &TerrainLayer,
+    view: &View,
+    last_eye: Option<DVec3>,
+    lookahead_frames: f64,
+    near_m: f64,
+    covered: impl Fn(TileKey) -> bool,
+    to_load: &mut Vec<TileRequest>,
+) -> u32 {
+    let Some(last) = last_eye else {
+        return 0;
+    };
+    let step = view.position - last;
+    if lookahead_frames <= 0.0 || step == DVec3::ZERO {
+        return 0;
+    }
+    let mut ahead = *view;
+    ahead.position += step * lookahead_frames;
+    let frustum = Frustum::from_view(&ahead, near_m);
+    let before = to_load.len();
+    to_load.retain(|r| {
+        !covered(r.key)
+            || frustum.intersect_box(&layer.tile(r.key).bounds.obb) != Intersection::Outside
+    });
+    (before - to_load.len()) as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A camera 10 km up looking north 30 degrees down, flying north at 20 km a frame: a
+    /// wanted tile just inside the bottom of the view is left behind within three frames and
+    /// not requested; one 100 km ahead is; nothing is dropped while the camera stands still
+    /// or with the lookahead switched off.
+    #[test]
+    fn requests_the_camera_is_leaving_behind_are_deferred() {
+        let source = Arc::new(ProceduralSource::new(DEFAULT_SEED, 16));
+        let layer = TerrainLayer::new(source, TerrainLayerOptions::default());
+        let ellipsoid = Ellipsoid::WGS84;
+        let eye = Cartographic::from_degrees(10.0, 45.0, 10_000.0);
+        let view = View::from_geodetic(
+            &ellipsoid,
+            eye,
+            0.0,
+            -30f64.to_radians(),
+            60f64.to_radians(),
+            960,
+            540,
+        );
+        let north_by = |km: f64| -> TileKey {
+            let lat = eye.lat_rad + km * 1000.0 / 6_371_000.0;
+            TilingScheme::Geographic
+                .tile_at(eye.lon_rad, lat, 12)
+                .expect("tile")
+        };
+        let (behind, ahead) = (north_by(9.0), north_by(100.0));
+        // Both are in today's view.
+        let now = Frustum::from_view(&view, 1.0);
+        for key in [behind, ahead] {
+            assert_ne!(
+                now.intersect_box(&layer.tile(key).bounds.obb),
+                Intersection::Outside
+            );
+        }
+        let request = |key| TileRequest { key, priority: 1.0 };
+        let step = ellipsoid
+            .cartographic_to_ecef(Cartographic::from_degrees(10.0, 45.18, 10_000.0))
+            - view.position;
+        let last_eye = Some(view.position - step);
+        let covered = |_| true;
+        let mut to_load = vec![request(behind), request(ahead)];
+        let deferred =
+            defer_requests_left_behind(&layer, &view, last_eye, 3.0, 1.0, covered, &mut to_load);
+        assert_eq!(deferred, 1);
+        assert_eq!(to_load.iter().map(|r| r.key).collect::<Vec<_>>(), [ahead]);
+        // Standing still, lookahead off, first frame, or nothing loaded above the tile to
+        // stand in for it: everything is requested.
+        for (last, lookahead, covered) in [
+            (Some(view.position), 3.0, true),
+            (last_eye, 0.0, true),
+            (None, 3.0, true),
+            (last_eye, 3.0, false),
+        ] {
+            let mut to_load = vec![request(behind), request(ahead)];
+            let deferred = defer_requests_left_behind(
+                &layer,
+                &view,
+                last,
+                lookahead,
+                1.0,
+                |_| covered,
+                &mut to_load,
+            );
+            assert_eq!(deferred, 0);
+            assert_eq!(to_load.len(), 2);
+        }
     }
 }

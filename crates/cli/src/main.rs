@@ -85,6 +85,12 @@ struct GlobeArgs {
     /// procedural refinement (a stand-in for real data that ends, like 90 m SRTM).
     #[arg(long = "refine-below")]
     refine_below: Option<u8>,
+    /// While the camera moves, do not request wanted tiles that will be out of view this many
+    /// frames ahead at its current velocity (a drawn ancestor covers them meanwhile); 0
+    /// requests every wanted tile.
+    /// (default 3).
+    #[arg(long = "request-lookahead")]
+    request_lookahead: Option<f64>,
 }
 
 #[derive(Args)]
@@ -349,6 +355,13 @@ fn globe_options(a: &GlobeArgs) -> anyhow::Result<GlobeOptions> {
         error_fraction: a.mesh_error,
     };
     options.refine_below = a.refine_below;
+    if let Some(f) = a.request_lookahead {
+        options.request_lookahead_frames = f;
+    }
+    let lookahead = options.request_lookahead_frames;
+    if !(0.0..=1000.0).contains(&lookahead) {
+        bail!("--request-lookahead {lookahead} must be a number of frames from 0 to 1000");
+    }
     Ok(options)
 }
 
@@ -557,7 +570,8 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     // Counting starts with the path.
     off.globe.layer_mut().track_usage();
     let frames = (path.duration() * a.fps).floor() as usize + 1;
-    let mut samples: Vec<[f64; 7]> = Vec::with_capacity(frames);
+    let mut samples: Vec<[f64; 8]> = Vec::with_capacity(frames);
+    let mut deferred = 0u64;
     let clock = Instant::now();
     for i in 0..frames {
         let t = i as f64 / a.fps;
@@ -581,7 +595,9 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             f64::from(r.draw.draw_calls),
             r.draw.triangles as f64,
             r.select_cpu_us,
+            f64::from(r.wanted),
         ]);
+        deferred += u64::from(r.requests_deferred);
     }
     let names = [
         "select_us",
@@ -591,8 +607,15 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
         "draw_calls",
         "triangles",
         "select_cpu_us",
+        "tiles_wanted_not_drawable",
     ];
     let mut summary = serde_json::Map::new();
+    let complete = samples.iter().filter(|s| s[7] == 0.0).count();
+    summary.insert(
+        "complete_frames_fraction".into(),
+        json!(complete as f64 / frames.max(1) as f64),
+    );
+    summary.insert("requests_deferred_while_moving".into(), json!(deferred));
     summary.insert("frames".into(), json!(frames));
     summary.insert("size".into(), json!([width, height]));
     summary.insert("sse_px".into(), json!(sse_px));
