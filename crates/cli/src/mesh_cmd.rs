@@ -77,13 +77,18 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
     let (grid, resampled_from) = read_elevation_png(&args.input, &bytes, encoding)?;
     let mut times = Vec::new();
     let mut mesh = AdaptiveMesh::default();
-    // One scratch for every repeat, as a tiler meshing tile after tile keeps one per thread.
+    // One scratch and one output for every repeat, as a tiler meshing tile after tile keeps
+    // one of each per thread.
     let mut scratch = RtinScratch::default();
+    let mut rtin = Rtin::default();
     for _ in 0..args.repeat.max(1) {
         let start = Instant::now();
-        mesh = match args.method.as_str() {
-            "rtin" => Rtin::build(&grid, &mut scratch).mesh(max_error),
-            "decimate" => decimate::decimate(&grid, max_error),
+        match args.method.as_str() {
+            "rtin" => {
+                rtin.rebuild(&grid, &mut scratch);
+                rtin.mesh_into(max_error, u16::MAX, &mut scratch, &mut mesh);
+            }
+            "decimate" => mesh = decimate::decimate(&grid, max_error),
             other => bail!("unknown mesh method {other:?} (use rtin or decimate)"),
         };
         times.push(start.elapsed().as_secs_f64() * 1e3);

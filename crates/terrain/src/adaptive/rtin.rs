@@ -34,7 +34,8 @@ use super::{AdaptiveMesh, HeightGrid};
 mod levels;
 
 /// A tile's RTIN hierarchy with exact errors; build once, then [`Rtin::mesh`] per bound.
-#[derive(Clone, Debug)]
+/// The default is an empty hierarchy to [`Rtin::rebuild`] into (its meshes are empty).
+#[derive(Clone, Debug, Default)]
 pub struct Rtin {
     side: usize,
     /// Per sample: the refinement error stored at it as a hypotenuse midpoint (0 at corners).
@@ -49,9 +50,23 @@ impl Rtin {
 
     /// Like [`Rtin::new`], with buffers kept in `scratch` for the next grid.
     pub fn build(grid: &HeightGrid, scratch: &mut RtinScratch) -> Self {
-        let side = grid.side();
-        let errors = levels::errors(grid.heights(), side, &mut scratch.0);
-        Self { side, errors }
+        let mut rtin = Self {
+            side: grid.side(),
+            errors: Vec::new(),
+        };
+        rtin.rebuild(grid, scratch);
+        rtin
+    }
+
+    /// Replaces this hierarchy by the one of `grid`, reusing its memory and `scratch`'s.
+    pub fn rebuild(&mut self, grid: &HeightGrid, scratch: &mut RtinScratch) {
+        self.side = grid.side();
+        levels::errors(
+            grid.heights(),
+            self.side,
+            &mut scratch.levels,
+            &mut self.errors,
+        );
     }
 
     /// Samples per side of the grid.
@@ -75,59 +90,99 @@ impl Rtin {
     /// the ellipsoid between its corners. The limit depends only on a triangle's level, so
     /// the mesh stays conforming. A negative `max_error` keeps every grid vertex.
     pub fn mesh_with(&self, max_error: f64, max_leg: u16) -> AdaptiveMesh {
+        let mut mesh = AdaptiveMesh::default();
+        self.mesh_into(max_error, max_leg, &mut RtinScratch::default(), &mut mesh);
+        mesh
+    }
+
+    /// Like [`Rtin::mesh_with`], into `mesh` (its buffers reused), with the vertex map kept in
+    /// `scratch`: a tiler meshing tile after tile with one scratch and one output per thread
+    /// allocates nothing once they have grown.
+    pub fn mesh_into(
+        &self,
+        max_error: f64,
+        max_leg: u16,
+        scratch: &mut RtinScratch,
+        mesh: &mut AdaptiveMesh,
+    ) {
         let side = self.side;
+        mesh.side = side;
+        mesh.vertices.clear();
+        mesh.triangles.clear();
+        if side < 2 {
+            return;
+        }
         let n = (side - 1) as u16;
+        // Every entry is u32::MAX between calls: only the entries of used vertices are
+        // written, and they are put back below.
+        let index_of = &mut scratch.index_of;
+        if index_of.len() != side * side {
+            index_of.clear();
+            index_of.resize(side * side, u32::MAX);
+        }
         let mut builder = MeshBuilder {
             side,
             errors: &self.errors,
             max_error: max_error as f32,
             max_leg: max_leg.max(1),
-            index_of: vec![u32::MAX; side * side],
-            mesh: AdaptiveMesh {
-                side,
-                ..AdaptiveMesh::default()
-            },
+            index_of,
+            mesh,
         };
-        builder.split([0, 0], [n, n], [n, 0]);
-        builder.split([n, n], [0, 0], [0, n]);
-        builder.mesh
+        // Corners as row-major sample indices (a hypotenuse's midpoint is their mean).
+        let at = |x: u16, y: u16| u32::from(y) * side as u32 + u32::from(x);
+        let (nw, ne, sw, se) = (at(0, 0), at(n, 0), at(0, n), at(n, n));
+        builder.split(nw, se, ne, n, true);
+        builder.split(se, nw, sw, n, true);
+        for &[x, y] in &mesh.vertices {
+            index_of[usize::from(y) * side + usize::from(x)] = u32::MAX;
+        }
     }
 }
 
-/// Buffers [`Rtin::build`] keeps from one grid to the next (a few times the grid's size):
-/// building many tiles with one scratch per thread spares the allocations and page faults.
+/// Buffers [`Rtin::build`] and [`Rtin::mesh_into`] keep from one grid to the next (a few
+/// times the grid's size): meshing many tiles with one scratch per thread spares the
+/// allocations and their page faults.
 #[derive(Default)]
-pub struct RtinScratch(levels::Scratch);
+pub struct RtinScratch {
+    levels: levels::Scratch,
+    /// Per grid sample: its vertex index in the mesh being built, or u32::MAX.
+    index_of: Vec<u32>,
+}
 
 struct MeshBuilder<'a> {
     side: usize,
     errors: &'a [f32],
     max_error: f32,
     max_leg: u16,
-    index_of: Vec<u32>,
-    mesh: AdaptiveMesh,
+    index_of: &'a mut [u32],
+    mesh: &'a mut AdaptiveMesh,
 }
 
 impl MeshBuilder<'_> {
-    /// Emits triangle (a, b, c) (hypotenuse a-b, apex c) or its refinement.
-    fn split(&mut self, a: [u16; 2], b: [u16; 2], c: [u16; 2]) {
-        let m = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2];
-        let leg = a[0].abs_diff(c[0]) + a[1].abs_diff(c[1]);
-        let at = usize::from(m[1]) * self.side + usize::from(m[0]);
-        if leg > 1 && (leg > self.max_leg || self.errors[at] > self.max_error) {
-            self.split(c, a, m);
-            self.split(b, c, m);
+    /// Emits triangle (a, b, c) (hypotenuse a-b, apex c; row-major sample indices) or its
+    /// refinement. `leg` is its legs' length as `|dx| + |dy|` and `diagonal` whether its
+    /// hypotenuse is a square's diagonal (an A triangle, whose children keep its leg length;
+    /// a B triangle's children have half).
+    fn split(&mut self, a: u32, b: u32, c: u32, leg: u16, diagonal: bool) {
+        let m = (a + b) / 2;
+        if leg > 1 && (leg > self.max_leg || self.errors[m as usize] > self.max_error) {
+            let leg = if diagonal { leg } else { leg / 2 };
+            self.split(c, a, m, leg, !diagonal);
+            self.split(b, c, m, leg, !diagonal);
         } else {
             let t = [self.vertex(a), self.vertex(b), self.vertex(c)];
             self.mesh.triangles.push(t);
         }
     }
 
-    fn vertex(&mut self, p: [u16; 2]) -> u32 {
-        let at = usize::from(p[1]) * self.side + usize::from(p[0]);
+    fn vertex(&mut self, p: u32) -> u32 {
+        let at = p as usize;
         if self.index_of[at] == u32::MAX {
             self.index_of[at] = self.mesh.vertices.len() as u32;
-            self.mesh.vertices.push(p);
+            let side = self.side as u32;
+            self.mesh
+                .vertices
+                .push([(p % side) as u16, (p / side) as u16]);
         }
         self.index_of[at]
     }
@@ -327,6 +382,31 @@ mod tests {
         ] {
             let reused = Rtin::build(&grid, &mut scratch);
             assert_eq!(reused.errors(), Rtin::new(&grid).errors());
+        }
+    }
+
+    /// One hierarchy rebuilt and one scratch and output reused across grids of two sizes and
+    /// several bounds give exactly the meshes fresh ones do (the vertex map is left clean).
+    #[test]
+    fn reused_buffers_give_the_same_meshes() {
+        let mut scratch = RtinScratch::default();
+        let mut rtin = Rtin::default();
+        let mut mesh = AdaptiveMesh::default();
+        rtin.mesh_into(1.0, u16::MAX, &mut scratch, &mut mesh);
+        assert!(mesh.triangles.is_empty() && mesh.vertices.is_empty());
+        for (grid, max_error, max_leg) in [
+            (rough(129, 1, 900.0), 5.0, u16::MAX),
+            (rough(129, 2, 900.0), 0.5, 8),
+            (random(3, 4, 80.0), 2.0, u16::MAX),
+            (rough(129, 5, 2000.0), 20.0, u16::MAX),
+            (rough(129, 5, 2000.0), -1.0, 1),
+        ] {
+            rtin.rebuild(&grid, &mut scratch);
+            rtin.mesh_into(max_error, max_leg, &mut scratch, &mut mesh);
+            let fresh = Rtin::new(&grid).mesh_with(max_error, max_leg);
+            assert_eq!(mesh.side, grid.side());
+            assert_eq!(mesh.vertices, fresh.vertices);
+            assert_eq!(mesh.triangles, fresh.triangles);
         }
     }
 

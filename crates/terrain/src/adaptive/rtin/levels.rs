@@ -29,10 +29,11 @@ const ACROSS_SQUARES_UP_TO: usize = 16;
 
 /// The refinement error stored at every sample of the `side` x `side` grid `h` (0 at the
 /// tile's corners): level by level from the smallest squares up.
-pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch) -> Vec<f32> {
+pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch, errors: &mut Vec<f32>) {
     let n = side - 1;
-    let mut errors = vec![0.0f32; side * side];
-    level_two(h, side, &mut errors);
+    errors.clear();
+    errors.resize(side * side, 0.0);
+    level_two(h, side, errors);
     scratch.transposed = false;
     scratch.phased.data.clear();
     let mut s = 4;
@@ -42,10 +43,9 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch) -> Vec<f32> 
         } else {
             across_squares(h, side, s, scratch);
         }
-        combine(&mut errors, scratch, side, s);
+        combine(errors, scratch, side, s);
         s *= 2;
     }
-    errors
 }
 
 /// Per-square errors of one level and the buffers reused from level to level (fresh ones
