@@ -10,9 +10,9 @@ use globus_geo::Ellipsoid;
 use globus_terrain::adaptive::{AdaptiveMesh, HeightGrid, Rtin, RtinScratch, decimate};
 use globus_terrain::encoding::ElevationEncoding;
 use globus_terrain::quantized_mesh::{
-    QuantizedMesh, QuantizedMeshOptions, TileProjection, WaterMask, from_adaptive_mesh,
+    BorderRing, QuantizedMesh, QuantizedMeshOptions, TileProjection, WaterMask, from_adaptive_mesh,
 };
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::{Direction, TileKey, TilingScheme};
 use serde_json::{Value, json};
 
 /// Options of `globus mesh`.
@@ -113,7 +113,8 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(out) = &args.out {
-        let qm = quantize(args, &grid, &mesh)?;
+        let (qm, neighbours) = quantize(args, encoding, &grid, &mesh)?;
+        report["normals_across_edges"] = json!(neighbours);
         let gzip = out.extension().is_some_and(|e| e == "gz");
         std::fs::write(out, qm.encode(gzip))
             .with_context(|| format!("writing {}", out.display()))?;
@@ -141,11 +142,13 @@ pub fn summary_line(report: &Value) -> String {
     }
 }
 
+/// The quantized-mesh tile of `mesh`, and the edges whose normals use the neighbouring tile.
 fn quantize(
     args: &MeshArgs,
+    encoding: ElevationEncoding,
     grid: &HeightGrid,
     mesh: &AdaptiveMesh,
-) -> anyhow::Result<QuantizedMesh> {
+) -> anyhow::Result<(QuantizedMesh, Vec<&'static str>)> {
     let scheme = crate::tile_cmd::parse_scheme(&args.scheme)?;
     let key = match &args.tile {
         Some(name) => parse_tile(scheme, name)?,
@@ -160,18 +163,86 @@ fn quantize(
         TilingScheme::Geographic => TileProjection::Geographic,
         TilingScheme::WebMercator => TileProjection::WebMercator,
     };
+    // In a pyramid (the input is .../Z/X/Y.png), the neighbours' samples next to the shared
+    // edges make the edge normals central differences, as the neighbours' own are.
+    let border = if tile_from_path(scheme, &args.input) == Some(key) {
+        border_ring(&args.input, scheme, key, encoding, grid.side())?
+    } else {
+        BorderRing::default()
+    };
+    let neighbours = [
+        ("north", &border.north),
+        ("east", &border.east),
+        ("south", &border.south),
+        ("west", &border.west),
+    ]
+    .into_iter()
+    .filter_map(|(name, side)| side.is_some().then_some(name))
+    .collect();
     let options = QuantizedMeshOptions {
         normals: true,
+        border,
         ..QuantizedMeshOptions::default()
     };
-    Ok(from_adaptive_mesh(
+    let qm = from_adaptive_mesh(
         mesh,
         grid,
         &scheme.rect(key),
         projection,
         &Ellipsoid::WGS84,
         &options,
-    ))
+    );
+    Ok((qm, neighbours))
+}
+
+/// The samples just outside `key`'s grid, from the neighbouring tiles beside `input` in its
+/// `Z/X/Y` pyramid (same encoding, same grid size; they share the tile's edge samples, so
+/// the sample next to the edge is their second row or column). Missing neighbours are left
+/// out; a neighbour that is there but unreadable or of another size is an error naming it.
+fn border_ring(
+    input: &Path,
+    scheme: TilingScheme,
+    key: TileKey,
+    encoding: ElevationEncoding,
+    side: usize,
+) -> anyhow::Result<BorderRing> {
+    let (Some(level_dir), Some(ext)) = (
+        input.parent().and_then(Path::parent),
+        input.extension().and_then(|e| e.to_str()),
+    ) else {
+        return Ok(BorderRing::default());
+    };
+    let neighbour = |direction: Direction| -> anyhow::Result<Option<HeightGrid>> {
+        let Some(n) = key.neighbor(scheme, direction) else {
+            return Ok(None);
+        };
+        let path = level_dir
+            .join(n.x().to_string())
+            .join(format!("{}.{ext}", n.y()));
+        let bytes = match std::fs::read(&path) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        };
+        let (grid, _) = read_elevation_png(&path, &bytes, encoding)?;
+        if grid.side() != side {
+            bail!(
+                "{}: neighbour of {} samples per side, the tile has {side}",
+                path.display(),
+                grid.side()
+            );
+        }
+        Ok(Some(grid))
+    };
+    let last = side - 1;
+    let row = |g: &HeightGrid, y: usize| (0..side).map(|x| g.at(x, y)).collect::<Vec<_>>();
+    let column = |g: &HeightGrid, x: usize| (0..side).map(|y| g.at(x, y)).collect::<Vec<_>>();
+    Ok(BorderRing {
+        north: neighbour(Direction::North)?.map(|g| row(&g, last - 1)),
+        south: neighbour(Direction::South)?.map(|g| row(&g, 1)),
+        west: neighbour(Direction::West)?.map(|g| column(&g, last - 1)),
+        east: neighbour(Direction::East)?.map(|g| column(&g, 1)),
+    })
 }
 
 fn parse_tile(scheme: TilingScheme, name: &str) -> anyhow::Result<TileKey> {

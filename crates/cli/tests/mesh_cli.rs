@@ -290,7 +290,7 @@ fn quantized_mesh_tile_reads_a_globus_water_mask() {
     let options = QuantizedMeshOptions {
         normals: true,
         water_mask: Some(WaterMask::Grid(mask.clone())),
-        metadata: None,
+        ..QuantizedMeshOptions::default()
     };
     let qm = from_adaptive_mesh(
         &mesh,
@@ -491,4 +491,97 @@ fn bad_input_gets_one_line() {
         all.extend(args.iter().map(String::as_str));
         fails_with_one_line(&all, &needles);
     }
+}
+
+/// Four tiles of a pyramid (`Z/X/Y.png`) cut from one surface, sharing their edge samples:
+/// meshed one by one, a tile's normals on an edge it shares with a neighbour are the
+/// neighbour's there, to the bit (central differences over the same samples); a tile meshed
+/// with no neighbours beside it (one-sided differences on its edges) differs.
+#[test]
+fn normals_agree_across_tile_edges_in_a_pyramid() {
+    let side = 33;
+    let (z, x0, y0) = (12u8, 4300u32, 1200u32);
+    // Hills about a kilometre across on samples about 150 m apart.
+    let height = |gx: usize, gy: usize| {
+        let (gx, gy) = (gx as f64, gy as f64);
+        (300.0 * (0.5 * gx).sin() * (0.37 * gy).cos() + 2.0 * gx) as f32
+    };
+    let tile_heights = |tx: u32, ty: u32| -> Vec<f32> {
+        let (ox, oy) = (
+            (tx - x0) as usize * (side - 1),
+            (ty - y0) as usize * (side - 1),
+        );
+        (0..side * side)
+            .map(|k| height(ox + k % side, oy + k / side))
+            .collect()
+    };
+    let pyramid = scratch("normals_pyramid");
+    let alone = scratch("normals_alone");
+    let png = |root: &Path, tx: u32, ty: u32| {
+        let dir = root.join(z.to_string()).join(tx.to_string());
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(format!("{ty}.png"))
+    };
+    for (tx, ty) in [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)] {
+        write_terrarium(&png(&pyramid, tx, ty), side, &tile_heights(tx, ty));
+    }
+    write_terrarium(&png(&alone, x0, y0), side, &tile_heights(x0, y0));
+    let mesh = |input: PathBuf| -> (QuantizedMesh, Value) {
+        let out = input.with_extension("terrain");
+        let report = globus_json(&[
+            "mesh",
+            "--in",
+            s(&input),
+            "--encoding",
+            "terrarium",
+            "--max-error",
+            "0",
+            "--out",
+            s(&out),
+            "--json",
+        ]);
+        let qm = QuantizedMesh::decode(&std::fs::read(&out).unwrap()).unwrap();
+        (qm, report)
+    };
+    let (a, a_report) = mesh(png(&pyramid, x0, y0));
+    let (east, _) = mesh(png(&pyramid, x0 + 1, y0));
+    let (south, _) = mesh(png(&pyramid, x0, y0 + 1));
+    let (lonely, lonely_report) = mesh(png(&alone, x0, y0));
+    assert_eq!(
+        a_report["normals_across_edges"],
+        serde_json::json!(["east", "south"])
+    );
+    assert_eq!(lonely_report["normals_across_edges"], serde_json::json!([]));
+    // How many of `p`'s vertices on edge `pe` have the normal of `q`'s vertex on edge `qe` at
+    // the same place (matched by the coordinate along the edge), of how many matched.
+    let agreeing = |p: &QuantizedMesh, pe: &[u32], q: &QuantizedMesh, qe: &[u32], along_u: bool| {
+        let along = |m: &QuantizedMesh, i: u32| {
+            if along_u {
+                m.u[i as usize]
+            } else {
+                m.v[i as usize]
+            }
+        };
+        let normal = |m: &QuantizedMesh, i: u32| m.normals.as_ref().unwrap()[i as usize];
+        let (mut same, mut matched) = (0, 0);
+        for &i in pe {
+            if let Some(&j) = qe.iter().find(|&&j| along(q, j) == along(p, i)) {
+                matched += 1;
+                same += usize::from(normal(p, i) == normal(q, j));
+            }
+        }
+        assert_eq!(
+            matched, side,
+            "every edge sample is a vertex at --max-error 0"
+        );
+        same
+    };
+    assert_eq!(agreeing(&a, &a.east, &east, &east.west, false), side);
+    assert_eq!(agreeing(&a, &a.south, &south, &south.north, true), side);
+    let lonely_east = agreeing(&lonely, &lonely.east, &east, &east.west, false);
+    let lonely_south = agreeing(&lonely, &lonely.south, &south, &south.north, true);
+    assert!(
+        lonely_east < side / 2 && lonely_south < side / 2,
+        "one-sided edge normals agree at {lonely_east} and {lonely_south} of {side} vertices"
+    );
 }

@@ -37,10 +37,52 @@ pub struct QuantizedMeshOptions {
     pub water_mask: Option<WaterMask>,
     /// Write this JSON metadata (extension 4).
     pub metadata: Option<String>,
+    /// Heights just outside the grid, from the neighbouring tiles, for the normals.
+    pub border: BorderRing,
+}
+
+/// The heights one sample outside a tile's grid on each side, taken from the neighbouring
+/// tiles (which share the tile's edge samples): with them the normals on the tile's edges
+/// are central differences over the same samples the neighbour uses, so both tiles shade a
+/// shared edge alike. A side without a neighbour (`None`, or the wrong length) falls back to
+/// one-sided differences.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BorderRing {
+    /// The row north of the grid, west to east (`side` samples).
+    pub north: Option<Vec<f32>>,
+    /// The row south of the grid, west to east.
+    pub south: Option<Vec<f32>>,
+    /// The column west of the grid, north to south.
+    pub west: Option<Vec<f32>>,
+    /// The column east of the grid, north to south.
+    pub east: Option<Vec<f32>>,
+}
+
+impl BorderRing {
+    /// The ring's height at grid position (x, y) just outside the grid, if known.
+    fn at(&self, side: usize, x: i64, y: i64) -> Option<f32> {
+        let n = side as i64;
+        let inside = |v: i64| (0..n).contains(&v);
+        let (row, i) = if y == -1 && inside(x) {
+            (&self.north, x)
+        } else if y == n && inside(x) {
+            (&self.south, x)
+        } else if x == -1 && inside(y) {
+            (&self.west, y)
+        } else if x == n && inside(y) {
+            (&self.east, y)
+        } else {
+            return None;
+        };
+        row.as_ref()
+            .filter(|r| r.len() == side)
+            .map(|r| r[i as usize])
+    }
 }
 
 /// Quantizes `mesh` over `grid`, placed on `rect` of `ellipsoid`. Normals come from the grid
-/// by central differences (one-sided on the tile's edges).
+/// by central differences, on the tile's edges over `options.border` where it is known and
+/// one-sided where not.
 pub fn from_adaptive_mesh(
     mesh: &AdaptiveMesh,
     grid: &HeightGrid,
@@ -50,11 +92,24 @@ pub fn from_adaptive_mesh(
     options: &QuantizedMeshOptions,
 ) -> QuantizedMesh {
     let n = (grid.side() - 1) as f64;
-    let position = |x: usize, y: usize| {
-        let lon = rect.west + rect.width() * x as f64 / n;
-        let lat = projection.lat_at(rect, y as f64 / n);
-        let h = f64::from(grid.at(x, y));
-        ellipsoid.cartographic_to_ecef(Cartographic::new(lon, lat, h))
+    let place = |x: f64, y: f64, h: f32| {
+        let lon = rect.west + rect.width() * x / n;
+        let lat = projection.lat_at(rect, y / n);
+        ellipsoid.cartographic_to_ecef(Cartographic::new(lon, lat, f64::from(h)))
+    };
+    let position = |x: usize, y: usize| place(x as f64, y as f64, grid.at(x, y));
+    // A grid or ring sample next to (x, y), or (x, y) itself where neither is known.
+    let beside = |x: usize, y: usize, dx: i64, dy: i64| {
+        let (bx, by) = (x as i64 + dx, y as i64 + dy);
+        let last = grid.side() as i64 - 1;
+        if (0..=last).contains(&bx) && (0..=last).contains(&by) {
+            position(bx as usize, by as usize)
+        } else {
+            match options.border.at(grid.side(), bx, by) {
+                Some(h) => place(bx as f64, by as f64, h),
+                None => position(x, y),
+            }
+        }
     };
     let heights: Vec<f32> = mesh
         .vertices
@@ -96,9 +151,8 @@ pub fn from_adaptive_mesh(
             .iter()
             .map(|&[x, y]| {
                 let (x, y) = (usize::from(x), usize::from(y));
-                let last = grid.side() - 1;
-                let east = position((x + 1).min(last), y) - position(x.saturating_sub(1), y);
-                let north = position(x, y.saturating_sub(1)) - position(x, (y + 1).min(last));
+                let east = beside(x, y, 1, 0) - beside(x, y, -1, 0);
+                let north = beside(x, y, 0, -1) - beside(x, y, 0, 1);
                 let up = ellipsoid
                     .geodetic_normal(position(x, y))
                     .unwrap_or(DVec3::Z);

@@ -25,7 +25,7 @@ use std::io::Read;
 
 use globus_geo::DVec3;
 
-pub use from_grid::{QuantizedMeshOptions, TileProjection, from_adaptive_mesh};
+pub use from_grid::{BorderRing, QuantizedMeshOptions, TileProjection, from_adaptive_mesh};
 
 /// Largest value of u, v and height.
 pub const QUANTIZED_MAX: u16 = 32767;

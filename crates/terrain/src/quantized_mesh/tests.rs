@@ -15,6 +15,7 @@ fn sample_tile(
         normals: true,
         water_mask: Some(WaterMask::Uniform(0)),
         metadata: Some(r#"{"available":[]}"#.into()),
+        ..QuantizedMeshOptions::default()
     };
     let qm = from_adaptive_mesh(
         &mesh,
