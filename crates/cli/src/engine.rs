@@ -591,9 +591,10 @@ fn defer_requests_left_behind(
     ahead.position += step * lookahead_frames;
     let frustum = Frustum::from_view(&ahead, near_m);
     let before = to_load.len();
+    // The ancestor walk only for tiles the predicted view misses.
     to_load.retain(|r| {
-        !covered(r.key)
-            || frustum.intersect_box(&layer.tile(r.key).bounds.obb) != Intersection::Outside
+        frustum.intersect_box(&layer.tile(r.key).bounds.obb) != Intersection::Outside
+            || !covered(r.key)
     });
     (before - to_load.len()) as u32
 }

@@ -87,8 +87,7 @@ struct GlobeArgs {
     refine_below: Option<u8>,
     /// While the camera moves, do not request wanted tiles that will be out of view this many
     /// frames ahead at its current velocity (a drawn ancestor covers them meanwhile); 0
-    /// requests every wanted tile.
-    /// (default 3).
+    /// requests every wanted tile (default 3).
     #[arg(long = "request-lookahead")]
     request_lookahead: Option<f64>,
 }
