@@ -12,6 +12,11 @@
 //! GPU pool (the engine marks uploads and evictions with [`TerrainLayer::set_drawable`]), so
 //! everything it draws can be drawn this very frame: no holes while data streams in, only
 //! coarser ancestors.
+//!
+//! Imagery that loads on its own ([`TileColour`]) arrives after its tile's geometry: the
+//! tile is uploaded without it, reading its nearest resident ancestor's colour cropped and
+//! scaled (a root is uploaded first if no ancestor has colour on the GPU), and its own colour
+//! follows when it arrives. Drawn tiles' colours go up before new tiles: they are on screen.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -26,7 +31,7 @@ use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
 use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid, open_layer};
 use globus_stream::{
     LayerStats, ProceduralSource, RasterTerrainSource, RefinedSource, TerrainLayer,
-    TerrainLayerOptions, TerrainSource,
+    TerrainLayerOptions, TerrainSource, TileColour,
 };
 use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
@@ -192,6 +197,8 @@ pub struct FrameReport {
     /// Wanted tiles not requested because the moving camera will have left them behind
     /// ([`Globe::request_lookahead_frames`]).
     pub requests_deferred: u32,
+    /// Drawn tiles showing an ancestor's colour while their own loads (or waits for upload).
+    pub colours_pending: u32,
 }
 
 /// The procedural planet, its data layer and its renderer.
@@ -378,24 +385,81 @@ impl Globe {
                 key = k.parent();
             }
         }
+        // Colours that arrived for tiles on screen first, then new tiles.
+        let mut colours_pending = 0;
+        for d in &self.selection.draw {
+            if pool.resident(d.key).is_none_or(|r| r.own_colour) {
+                continue;
+            }
+            match self.layer.colour(d.key) {
+                Some(TileColour::Ready(c)) => {
+                    if !pool.upload_colour(queue, d.key, c) {
+                        colours_pending += 1;
+                    }
+                }
+                Some(TileColour::Loading) => colours_pending += 1,
+                Some(TileColour::Borrowed) | None => {}
+            }
+        }
         let mut pool_full = false;
+        let mut evicted = Vec::new();
+        let mut uploaded = Vec::new();
         for r in &to_upload {
             if !pool.can_upload() {
                 break;
             }
-            let Some(data) = self.layer.get(r.key) else {
+            let (Some(data), Some(colour)) = (self.layer.get(r.key), self.layer.colour(r.key))
+            else {
                 continue;
             };
-            let mut evicted = Vec::new();
-            let uploaded = pool.upload(queue, r.key, &data.mesh, &data.tile.colour, &mut evicted);
-            for k in evicted {
-                self.layer.set_drawable(k, false);
+            let own = match colour {
+                TileColour::Ready(c) => Some(c),
+                TileColour::Loading | TileColour::Borrowed => None,
+            };
+            if own.is_none()
+                && let Some(source) = pool.colour_source(r.key)
+            {
+                // Keep what it borrows from for this frame.
+                pool.touch(source.from);
+            } else if own.is_none() {
+                // Nothing on the GPU to borrow from: the root (loaded with its colour, kept
+                // in the CPU cache) goes up first.
+                let root = r.key.ancestor_at(0);
+                let Some((root, Some(root_data), Some(TileColour::Ready(c)))) =
+                    root.map(|k| (k, self.layer.get(k), self.layer.colour(k)))
+                else {
+                    continue;
+                };
+                let placed = if pool.is_resident(root) {
+                    pool.upload_colour(queue, root, c)
+                } else {
+                    pool.upload(queue, root, &root_data.mesh, Some(c), &mut evicted)
+                        .is_some()
+                };
+                if !placed {
+                    continue;
+                }
+                uploaded.push(root);
+                if !pool.can_upload() {
+                    break;
+                }
             }
-            if uploaded.is_none() {
+            if pool
+                .upload(queue, r.key, &data.mesh, own, &mut evicted)
+                .is_none()
+            {
                 pool_full = true;
                 break;
             }
-            self.layer.set_drawable(r.key, true);
+            uploaded.push(r.key);
+        }
+        for k in evicted {
+            self.layer.set_drawable(k, false);
+        }
+        for k in uploaded {
+            // A tile evicted after its own upload (to make room later this frame) is not
+            // resident; ask the pool, not the list.
+            self.layer.set_drawable(k, pool.is_resident(k));
         }
         let budget_bound = pool_full || layer_stats.over_budget;
         self.adapt_detail(budget_bound);
@@ -427,6 +491,7 @@ impl Globe {
             draw,
             sse_bound_px: self.options.max_sse_px,
             requests_deferred,
+            colours_pending,
         }
     }
 
@@ -474,7 +539,7 @@ impl Globe {
         loop {
             let sse_before = self.options.max_sse_px;
             let report = self.frame(device, queue, view);
-            if report.wanted == 0 {
+            if report.wanted == 0 && report.colours_pending == 0 {
                 return (report, true);
             }
             if Instant::now() > deadline {
@@ -483,7 +548,8 @@ impl Globe {
             let progress = report.pool.uploaded_this_frame > 0 || report.sse_bound_px != sse_before;
             // Wait for tiles only if nothing could be uploaded this frame.
             if !progress {
-                if self.layer.loading() == 0 && report.layer.arrived == 0 {
+                let idle = self.layer.loading() == 0 && self.layer.colours_loading() == 0;
+                if idle && report.layer.arrived == 0 && report.layer.colours_arrived == 0 {
                     stalled += 1;
                     if stalled > 3 {
                         return (report, false);

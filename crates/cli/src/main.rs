@@ -569,7 +569,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     // Counting starts with the path.
     off.globe.layer_mut().track_usage();
     let frames = (path.duration() * a.fps).floor() as usize + 1;
-    let mut samples: Vec<[f64; 8]> = Vec::with_capacity(frames);
+    let mut samples: Vec<[f64; 9]> = Vec::with_capacity(frames);
     let mut deferred = 0u64;
     let clock = Instant::now();
     for i in 0..frames {
@@ -595,6 +595,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             r.draw.triangles as f64,
             r.select_cpu_us,
             f64::from(r.wanted),
+            f64::from(r.colours_pending),
         ]);
         deferred += u64::from(r.requests_deferred);
     }
@@ -607,9 +608,13 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
         "triangles",
         "select_cpu_us",
         "tiles_wanted_not_drawable",
+        "tiles_showing_ancestor_imagery",
     ];
     let mut summary = serde_json::Map::new();
-    let complete = samples.iter().filter(|s| s[7] == 0.0).count();
+    let complete = samples
+        .iter()
+        .filter(|s| s[7] == 0.0 && s[8] == 0.0)
+        .count();
     summary.insert(
         "complete_frames_fraction".into(),
         json!(complete as f64 / frames.max(1) as f64),
@@ -653,6 +658,13 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
     );
     summary.insert("retries".into(), json!(st.retries));
     summary.insert("tiles_failed".into(), json!(st.failed));
+    let cs = off.globe.layer().colour_scheduler_stats();
+    summary.insert("imagery_requested".into(), json!(cs.requested));
+    summary.insert("imagery_loaded".into(), json!(cs.loaded));
+    summary.insert(
+        "imagery_stopped_in_flight".into(),
+        json!(cs.cancelled_in_flight),
+    );
     if let Some(u) = off.globe.layer().usage() {
         summary.insert("loaded_never_drawn".into(), json!(u.loaded_never_drawn));
         summary.insert(
@@ -680,8 +692,9 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
 }
 
 /// The jump benchmark: everything loaded at one view, then a jump to another; reports when
-/// the first frame of the new view is out (and whether it has holes), and when every tile its
-/// selection wants is loaded and resident.
+/// the first frame of the new view is out (and whether it has holes), when every tile its
+/// selection wants is loaded and resident (`geometry_loaded_ms`), and when every drawn tile
+/// shows its own imagery too (`all_loaded_ms`).
 fn bench_jump(
     a: &BenchArgs,
     options: &GlobeOptions,
@@ -700,12 +713,14 @@ fn bench_jump(
         bail!("the first view did not finish loading in 300 s");
     }
     let before = off.globe.layer().scheduler_stats();
+    let colours_before = off.globe.layer().colour_scheduler_stats();
     let view_b = to.view(&off.globe, a.globe.fov_deg, width, height);
     off.globe.relax_detail = false;
     let started = Instant::now();
     let mut first_frame_ms = f64::NAN;
     let mut first_frame_holes = (0u32, 0u32);
     let mut all_loaded_ms = None;
+    let mut geometry_loaded_ms = None;
     let mut frames = 0u32;
     let mut last = None;
     while started.elapsed() < Duration::from_secs(120) {
@@ -722,7 +737,10 @@ fn bench_jump(
             // Uploads still reach the GPU.
             off.ctx.queue.submit([]);
         }
-        let done = report.wanted == 0;
+        if report.wanted == 0 && geometry_loaded_ms.is_none() {
+            geometry_loaded_ms = Some(started.elapsed().as_secs_f64() * 1e3);
+        }
+        let done = report.wanted == 0 && report.colours_pending == 0;
         last = Some(report);
         if done {
             all_loaded_ms = Some(started.elapsed().as_secs_f64() * 1e3);
@@ -730,6 +748,7 @@ fn bench_jump(
         }
     }
     let after = off.globe.layer().scheduler_stats();
+    let colours_after = off.globe.layer().colour_scheduler_stats();
     let e = off.globe.ellipsoid();
     let c = |cam: &CameraSpec| {
         globus_geo::Cartographic::new(cam.lon_deg.to_radians(), cam.lat_deg.to_radians(), 0.0)
@@ -742,11 +761,13 @@ fn bench_jump(
         "first_frame_pixels_on_planet": first_frame_holes.0,
         "first_frame_holes": first_frame_holes.1,
         "all_loaded_ms": all_loaded_ms,
+        "geometry_loaded_ms": geometry_loaded_ms,
         "frames": frames,
         "tiles_drawn": last.draw.tiles,
         "max_level": last.selection.max_level,
         "tiles_requested": after.requested - before.requested,
         "tiles_loaded": after.loaded - before.loaded,
+        "imagery_loaded": colours_after.loaded - colours_before.loaded,
         "retries": after.retries - before.retries,
         "tiles_failed": after.failed - before.failed,
         "per_host": options.http.per_host,

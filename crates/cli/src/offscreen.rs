@@ -34,6 +34,16 @@ impl Offscreen {
     pub fn new(options: &GlobeOptions, width: u32, height: u32) -> anyhow::Result<Self> {
         // Sources first: one that cannot be opened fails before a GPU context exists.
         let source = crate::engine::terrain_source(options)?;
+        Self::with_source(options, source, width, height)
+    }
+
+    /// Like [`Offscreen::new`], over a terrain source opened beforehand (tests wrap sources).
+    pub fn with_source(
+        options: &GlobeOptions,
+        source: std::sync::Arc<dyn globus_stream::TerrainSource>,
+        width: u32,
+        height: u32,
+    ) -> anyhow::Result<Self> {
         let ctx = GpuContext::headless()?;
         let globe = Globe::with_source(&ctx.device, OffscreenTarget::FORMAT, options, source);
         let target = OffscreenTarget::new(&ctx.device, width, height);

@@ -450,10 +450,12 @@ impl State {
             self.fps.frames = 0;
             self.fps.since = Instant::now();
             self.window.set_title(&format!(
-                "Globus | {:.1} fps | {} tiles drawn | {} loading | {:.0} m above ground",
+                "Globus | {:.1} fps | {} tiles drawn | {} loading | {} imagery loading | {:.0} m \
+                 above ground",
                 self.fps.fps,
                 report.draw.tiles,
                 report.wanted,
+                report.colours_pending,
                 self.height_above_ground()
             ));
         }

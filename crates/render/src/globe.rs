@@ -6,8 +6,9 @@
 //!    indirect draw record per drawn tile (its index range and base vertex in the pools).
 //! 2. [`GlobeRenderer::render`] (GPU): draws the sky with a full-screen triangle, then every
 //!    terrain tile, whatever its mesh, with one `multi_draw_indexed_indirect` over the shared
-//!    vertex and index pools. Each vertex carries its slot, which picks its offset and colour
-//!    layer.
+//!    vertex and index pools. Each vertex carries its slot, which picks its offset and its
+//!    colour: a layer of the colour pool and the part of it over the tile (its own layer
+//!    whole, or an ancestor's cropped while its own imagery loads).
 
 use std::mem::size_of;
 
@@ -103,6 +104,11 @@ pub struct DrawStats {
     pub triangles: u64,
     /// Tiles asked for but not resident (drawn by nobody; should stay 0).
     pub missing: u32,
+    /// Tiles drawn with an ancestor's colour, cropped and scaled (their own is loading).
+    pub borrowed_colour: u32,
+    /// Tiles drawn with no colour source at all (should stay 0: the engine uploads a tile
+    /// without its colour only where an ancestor's can stand in).
+    pub missing_colour: u32,
 }
 
 /// Pipelines and per-frame buffers for drawing the globe.
@@ -115,6 +121,9 @@ pub struct GlobeRenderer {
     sky_pipeline: wgpu::RenderPipeline,
     offset_buffer: wgpu::Buffer,
     offsets: Vec<[f32; 4]>,
+    colour_map_buffer: wgpu::Buffer,
+    /// Per slot: uv scale, uv offset (u, v) and colour layer.
+    colour_maps: Vec<[f32; 4]>,
     indirect_buffer: wgpu::Buffer,
     indirect_capacity: u32,
     draws: Vec<DrawIndexedArgs>,
@@ -175,6 +184,12 @@ impl GlobeRenderer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let colour_map_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tile colour maps"),
+            size: u64::from(slots) * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let indirect_capacity = 256;
         let indirect_buffer = indirect_buffer(device, indirect_capacity);
         Self {
@@ -186,6 +201,8 @@ impl GlobeRenderer {
             sky_pipeline,
             offset_buffer,
             offsets: vec![[0.0; 4]; slots as usize],
+            colour_map_buffer,
+            colour_maps: vec![[1.0, 0.0, 0.0, 0.0]; slots as usize],
             indirect_buffer,
             indirect_capacity,
             draws: Vec::new(),
@@ -229,6 +246,8 @@ impl GlobeRenderer {
 
         self.draws.clear();
         let mut missing = 0;
+        let mut borrowed_colour = 0;
+        let mut missing_colour = 0;
         let mut triangles = 0u64;
         for &key in inputs.tiles {
             let Some(r) = self.pool.resident(key) else {
@@ -238,6 +257,22 @@ impl GlobeRenderer {
             // The one place a planet-sized number becomes f32: after the f64 subtraction.
             let offset = (r.centre - view.position).as_vec3();
             self.offsets[r.slot as usize] = [offset.x, offset.y, offset.z, 0.0];
+            let slot = r.slot;
+            self.colour_maps[slot as usize] = match self.pool.colour_source(key) {
+                Some(c) => {
+                    borrowed_colour += u32::from(c.from != key);
+                    [
+                        c.scale as f32,
+                        c.offset[0] as f32,
+                        c.offset[1] as f32,
+                        c.layer as f32,
+                    ]
+                }
+                None => {
+                    missing_colour += 1;
+                    [1.0, 0.0, 0.0, slot as f32]
+                }
+            };
             let index_count = r.indices.len() as u32;
             triangles += u64::from(index_count / 3);
             self.draws.push(DrawIndexedArgs {
@@ -258,6 +293,11 @@ impl GlobeRenderer {
         }
         if !self.draws.is_empty() {
             queue.write_buffer(&self.offset_buffer, 0, bytemuck::cast_slice(&self.offsets));
+            queue.write_buffer(
+                &self.colour_map_buffer,
+                0,
+                bytemuck::cast_slice(&self.colour_maps),
+            );
             queue.write_buffer(&self.indirect_buffer, 0, bytemuck::cast_slice(&self.draws));
         }
         self.stats = DrawStats {
@@ -265,6 +305,8 @@ impl GlobeRenderer {
             tiles: count,
             triangles,
             missing,
+            borrowed_colour,
+            missing_colour,
         };
         self.stats
     }
@@ -341,6 +383,10 @@ impl GlobeRenderer {
                     binding: 2,
                     resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: self.colour_map_buffer.as_entire_binding(),
+                },
             ],
         })
     }
@@ -355,20 +401,25 @@ fn indirect_buffer(device: &wgpu::Device, capacity: u32) -> wgpu::Buffer {
     })
 }
 
+/// A read-only storage buffer of per-slot records, read by the vertex shader.
+fn per_slot_storage(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("terrain"),
         entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
+            per_slot_storage(0),
             wgpu::BindGroupLayoutEntry {
                 binding: 1,
                 visibility: wgpu::ShaderStages::FRAGMENT,
@@ -385,6 +436,7 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
                 ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                 count: None,
             },
+            per_slot_storage(3),
         ],
     })
 }

@@ -25,7 +25,8 @@ pub use camera::{CameraMatrices, near_plane_m};
 pub use context::{GpuContext, RenderError};
 pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting};
 pub use pool::{
-    MAX_TILE_INDICES, MAX_TILE_VERTICES, PoolStats, Residency, Resident, TilePool, TilePoolOptions,
+    ColourSource, MAX_TILE_INDICES, MAX_TILE_VERTICES, PoolStats, Residency, Resident, TilePool,
+    TilePoolOptions,
 };
 pub use ranges::RangeAllocator;
 pub use target::{DEPTH_FORMAT, DepthTarget, OffscreenTarget, RgbaImage};

@@ -7,7 +7,10 @@
 //!   vertex points at the tile's range.
 //! * A parallel per-vertex buffer of slot numbers: the vertex shader finds its tile's
 //!   centre-to-eye offset and colour layer from it (portable: no first-instance feature).
-//! * One 2D texture array with one layer (full mip chain) per slot for colour.
+//! * One 2D texture array with one layer (full mip chain) per slot for colour. A tile may be
+//!   resident before its own colour (imagery that loads on its own): it then reads the layer
+//!   of its nearest resident ancestor that has its own, cropped and scaled to its rectangle
+//!   ([`Residency::colour_source`]), until [`TilePool::upload_colour`] fills its layer.
 //!
 //! A tile is *resident* when it has a slot and its ranges. Room is made by evicting the least
 //! recently drawn tiles, never one used this frame, and at most
@@ -76,6 +79,8 @@ pub struct PoolStats {
     pub uploaded_total: u64,
     /// Tiles evicted since the start.
     pub evicted_total: u64,
+    /// Colours uploaded after their tiles (imagery that loads on its own) since the start.
+    pub colours_uploaded_total: u64,
     /// Vertices in use / capacity.
     pub vertices_used: u32,
     /// Vertex capacity.
@@ -101,7 +106,23 @@ pub struct Resident {
     pub indices: Range<u32>,
     /// ECEF origin of its vertices.
     pub centre: DVec3,
+    /// Whether its colour layer holds its own colour (else it borrows an ancestor's).
+    pub own_colour: bool,
     last_used: u64,
+}
+
+/// Where a tile's fragments read their colour: a layer of the colour pool, and the part of
+/// that layer over the tile (`uv * scale + offset`; v grows southwards, as in tiles).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColourSource {
+    /// The tile whose colour is read (the tile itself or an ancestor).
+    pub from: TileKey,
+    /// Its colour layer.
+    pub layer: u32,
+    /// Size of the tile in the layer's texture coordinates (1 for its own colour).
+    pub scale: f64,
+    /// Texture coordinates of the tile's north-west corner in the layer.
+    pub offset: [f64; 2],
 }
 
 /// Which tile sits where: slots, buffer ranges and recency. No GPU objects.
@@ -139,6 +160,39 @@ impl Residency {
         self.slots[slot as usize].as_ref()
     }
 
+    /// Where `key` reads its colour: its own layer once it has its colour, else the nearest
+    /// resident ancestor's that has, cropped and scaled to `key`'s rectangle. `None` if
+    /// neither exists. Quadtree keys of one scheme: a tile `d` levels below its ancestor
+    /// covers `1 / 2^d` of it in each direction.
+    pub fn colour_source(&self, key: TileKey) -> Option<ColourSource> {
+        let mut from = key;
+        loop {
+            if let Some(r) = self.get(from)
+                && r.own_colour
+            {
+                let depth = u32::from(key.level() - from.level());
+                let n = (1u64 << depth) as f64;
+                let corner = |k: u32, a: u32| (u64::from(k) - (u64::from(a) << depth)) as f64 / n;
+                return Some(ColourSource {
+                    from,
+                    layer: r.slot,
+                    scale: 1.0 / n,
+                    offset: [corner(key.x(), from.x()), corner(key.y(), from.y())],
+                });
+            }
+            from = from.parent()?;
+        }
+    }
+
+    /// Records that `key`'s layer now holds its own colour.
+    pub fn set_own_colour(&mut self, key: TileKey) {
+        if let Some(&s) = self.slot_of.get(&key)
+            && let Some(r) = self.slots[s as usize].as_mut()
+        {
+            r.own_colour = true;
+        }
+    }
+
     /// Marks a resident tile as used this frame.
     pub fn touch(&mut self, key: TileKey) {
         if let Some(&s) = self.slot_of.get(&key)
@@ -148,7 +202,8 @@ impl Residency {
         }
     }
 
-    /// Makes room for a tile of `vertices` and `indices` and records it (used this frame).
+    /// Makes room for a tile of `vertices` and `indices` and records it (used this frame,
+    /// without its own colour until [`Residency::set_own_colour`]).
     /// Returns its place, or `None` if it cannot fit without evicting a tile used this frame.
     /// Every tile evicted on the way is pushed to `evicted`, whether or not the call succeeds.
     pub fn place(
@@ -202,6 +257,7 @@ impl Residency {
             vertices: v,
             indices: i,
             centre,
+            own_colour: false,
             last_used: self.frame,
         };
         self.slots[slot as usize] = Some(resident.clone());
@@ -260,6 +316,14 @@ pub struct TilePool {
 }
 
 const MIP_LEVELS: u32 = COLOUR_SIZE.ilog2() + 1;
+
+/// Whether an image fills a colour layer: full size, every mip level complete.
+fn colour_fits(c: &ColourImage) -> bool {
+    c.size == COLOUR_SIZE
+        && c.mips.len() >= MIP_LEVELS as usize
+        && (0..MIP_LEVELS)
+            .all(|m| c.mips[m as usize].len() == ((COLOUR_SIZE >> m).pow(2) * 4) as usize)
+}
 const VERTEX_BYTES: u64 = size_of::<TerrainVertex>() as u64;
 
 impl TilePool {
@@ -373,16 +437,23 @@ impl TilePool {
         self.stats.uploaded_this_frame < self.options.uploads_per_frame
     }
 
-    /// Uploads a tile, evicting least recently used tiles to make room (pushed to `evicted`,
-    /// also when the upload then fails). Returns its slot, or `None` if the frame's budget is
-    /// spent, the data is malformed, or everything that could make room is in use this frame
-    /// (the pool is too small for the view: the caller should lower detail).
+    /// Where `key` reads its colour (see [`Residency::colour_source`]).
+    pub fn colour_source(&self, key: TileKey) -> Option<ColourSource> {
+        self.residency.colour_source(key)
+    }
+
+    /// Uploads a tile with its colour, or without (`None`: it borrows its nearest resident
+    /// ancestor's until [`TilePool::upload_colour`]), evicting least recently used tiles to
+    /// make room (pushed to `evicted`, also when the upload then fails). Returns its slot, or
+    /// `None` if the frame's budget is spent, the data is malformed, or everything that could
+    /// make room is in use this frame (the pool is too small for the view: the caller should
+    /// lower detail).
     pub fn upload(
         &mut self,
         queue: &wgpu::Queue,
         key: TileKey,
         mesh: &TileMesh,
-        colour: &ColourImage,
+        colour: Option<&ColourImage>,
         evicted: &mut Vec<TileKey>,
     ) -> Option<u32> {
         if let Some(r) = self.residency.get(key) {
@@ -390,7 +461,7 @@ impl TilePool {
         }
         let n_vertices = mesh.vertices.len() as u32;
         if !self.can_upload()
-            || colour.size != COLOUR_SIZE
+            || colour.is_some_and(|c| !colour_fits(c))
             || mesh.indices.iter().any(|&i| i >= n_vertices)
         {
             return None;
@@ -420,6 +491,42 @@ impl TilePool {
             u64::from(r.indices.start) * 4,
             bytemuck::cast_slice(&mesh.indices),
         );
+        if let Some(colour) = colour {
+            self.write_colour(queue, r.slot, colour);
+            self.residency.set_own_colour(key);
+        }
+        self.stats.uploaded_this_frame += 1;
+        self.stats.uploaded_total += 1;
+        Some(r.slot)
+    }
+
+    /// Fills a resident tile's colour layer with its own colour (it stops borrowing its
+    /// ancestor's). Counts against the frame's upload budget; false if that is spent, the
+    /// tile is not resident, or the image is not a full tile colour.
+    pub fn upload_colour(
+        &mut self,
+        queue: &wgpu::Queue,
+        key: TileKey,
+        colour: &ColourImage,
+    ) -> bool {
+        let Some(r) = self.residency.get(key) else {
+            return false;
+        };
+        if r.own_colour {
+            return true;
+        }
+        if !self.can_upload() || !colour_fits(colour) {
+            return false;
+        }
+        let slot = r.slot;
+        self.write_colour(queue, slot, colour);
+        self.residency.set_own_colour(key);
+        self.stats.uploaded_this_frame += 1;
+        self.stats.colours_uploaded_total += 1;
+        true
+    }
+
+    fn write_colour(&self, queue: &wgpu::Queue, slot: u32, colour: &ColourImage) {
         for (level, pixels) in colour.mips.iter().enumerate().take(MIP_LEVELS as usize) {
             let size = COLOUR_SIZE >> level;
             queue.write_texture(
@@ -429,7 +536,7 @@ impl TilePool {
                     origin: wgpu::Origin3d {
                         x: 0,
                         y: 0,
-                        z: r.slot,
+                        z: slot,
                     },
                     aspect: wgpu::TextureAspect::All,
                 },
@@ -446,9 +553,6 @@ impl TilePool {
                 },
             );
         }
-        self.stats.uploaded_this_frame += 1;
-        self.stats.uploaded_total += 1;
-        Some(r.slot)
     }
 
     /// Counters.
@@ -507,6 +611,45 @@ mod tests {
         assert_eq!(evicted, vec![key(1)]);
         assert!(r.get(key(1)).is_none() && r.get(key(0)).is_some());
         assert_eq!(r.len(), 3);
+    }
+
+    #[test]
+    fn tiles_without_their_colour_read_the_nearest_ancestors_cropped() {
+        let mut r = Residency::new(8, 10_000, 10_000);
+        let mut evicted = Vec::new();
+        r.begin_frame();
+        let root = TileKey::new(0, 1, 0);
+        let parent = TileKey::new(3, 13, 5);
+        // Three levels below the parent: x = 8 * 13 + 5, y = 8 * 5 + 2.
+        let tile = TileKey::new(6, 109, 42);
+        for k in [root, parent, tile] {
+            assert!(r.place(k, 10, 30, DVec3::ZERO, &mut evicted).is_some());
+        }
+        // Nobody has colour yet.
+        assert_eq!(r.colour_source(tile), None);
+        r.set_own_colour(root);
+        let s = r.colour_source(tile).expect("the root's");
+        assert_eq!(s.from, root);
+        // Level 6 tile 109 of the root's 64 columns 64..128, row 42 of 64.
+        assert_eq!(s.scale, 1.0 / 64.0);
+        assert_eq!(s.offset, [45.0 / 64.0, 42.0 / 64.0]);
+        r.set_own_colour(parent);
+        let s = r.colour_source(tile).expect("the parent's");
+        assert_eq!(
+            (s.from, s.layer),
+            (parent, r.get(parent).expect("resident").slot)
+        );
+        assert_eq!(s.scale, 0.125);
+        assert_eq!(s.offset, [5.0 / 8.0, 2.0 / 8.0]);
+        // The tile's own colour wins; a tile reads its own layer unscaled.
+        r.set_own_colour(tile);
+        let s = r.colour_source(tile).expect("its own");
+        assert_eq!((s.from, s.scale, s.offset), (tile, 1.0, [0.0, 0.0]));
+        // A tile not resident at all borrows too (the renderer never draws it, but the
+        // answer is still right).
+        let cousin = TileKey::new(4, 27, 11);
+        let s = r.colour_source(cousin).expect("the parent's");
+        assert_eq!((s.from, s.scale, s.offset), (parent, 0.5, [0.5, 0.5]));
     }
 
     #[test]

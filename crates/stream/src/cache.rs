@@ -51,6 +51,19 @@ impl<V> LruCache<V> {
         self.map.get(&key).map(|e| &e.value)
     }
 
+    /// The value for `key`, to change in place (its recency stays).
+    pub fn get_mut(&mut self, key: TileKey) -> Option<&mut V> {
+        self.map.get_mut(&key).map(|e| &mut e.value)
+    }
+
+    /// Sets the size of `key`'s value to `bytes` (after it grew or shrank in place).
+    pub fn resize(&mut self, key: TileKey, bytes: usize) {
+        if let Some(e) = self.map.get_mut(&key) {
+            self.bytes = self.bytes - e.bytes + bytes;
+            e.bytes = bytes;
+        }
+    }
+
     /// Whether `key` is cached.
     pub fn contains(&self, key: TileKey) -> bool {
         self.map.contains_key(&key)
@@ -151,5 +164,23 @@ mod tests {
         c.insert(k(1), (), 4, 2);
         assert_eq!(c.bytes(), 4);
         assert!(!c.is_over_budget());
+    }
+
+    #[test]
+    fn values_changed_in_place_keep_their_recency_and_count_their_new_size() {
+        let mut c = LruCache::new(25);
+        c.insert(k(1), vec![1u8], 10, 1);
+        c.insert(k(2), vec![2u8], 10, 2);
+        if let Some(v) = c.get_mut(k(1)) {
+            v.push(9);
+        }
+        c.resize(k(1), 12);
+        c.resize(k(7), 99);
+        assert_eq!(c.bytes(), 22);
+        assert_eq!(c.get(k(1)), Some(&vec![1, 9]));
+        // Still the oldest: it goes first once the budget binds.
+        c.insert(k(3), vec![3u8], 10, 3);
+        assert_eq!(c.evict_to_budget(|_, _| false), vec![k(1)]);
+        assert_eq!(c.bytes(), 20);
     }
 }

@@ -9,9 +9,15 @@
 //!
 //! A loaded tile is reported as [`TileState::Loaded`] only once the renderer has marked it
 //! drawable ([`TerrainLayer::set_drawable`]): everything selection draws can be drawn now.
+//!
+//! Tiles whose imagery loads on its own ([`TerrainData::colour_separate`]) get their colour
+//! from a second scheduler ([`crate::colour_jobs`]), asked for the drawn tiles (and the loaded
+//! ones about to be drawn) that lack it; the colour joins the tile's cache entry and budget.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+use globus_terrain::ColourImage;
 
 use globus_geo::Ellipsoid;
 use globus_tiling::{
@@ -19,17 +25,12 @@ use globus_tiling::{
 };
 use rustc_hash::{FxHashMap, FxHashSet};
 
+use crate::colour_jobs::{ColourChannel, Failures, MAX_REMEMBERED_KEYS};
 use crate::scheduler::Outcome;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
 
-/// A tile that failed for good is asked for again after this long, doubling with each
-/// failure up to [`FAILED_RETRY_MAX`].
-const FAILED_RETRY_AFTER: Duration = Duration::from_secs(30);
-/// Longest wait before asking for a failed tile again.
-const FAILED_RETRY_MAX: Duration = Duration::from_secs(600);
-
-/// Most "no data here" answers remembered (16 bytes each).
-const MAX_NO_DATA_KEYS: usize = 1 << 20;
+/// While waiting for terrain tiles, colour arrivals are looked for this often.
+const COLOUR_POLL: Duration = Duration::from_millis(5);
 
 /// Knobs of a terrain layer.
 #[derive(Clone, Copy, Debug)]
@@ -65,6 +66,10 @@ pub struct LayerStats {
     /// Whether the cache is over its budget with everything in use: nothing more is loaded
     /// until the engine lowers the detail.
     pub over_budget: bool,
+    /// Colours (separate imagery loads) that arrived this update.
+    pub colours_arrived: u32,
+    /// Colour loads queued or in flight after the update.
+    pub colours_loading: u32,
 }
 
 /// What became of loads over a session, for benchmarks.
@@ -83,6 +88,8 @@ pub struct UsageStats {
     pub loaded_again_while_cached: u64,
     /// Loads of a tile loaded before and evicted since.
     pub loaded_again_after_eviction: u64,
+    /// Colours that arrived in loads of their own (separate imagery).
+    pub colours_loaded: u64,
 }
 
 #[derive(Default)]
@@ -104,10 +111,31 @@ struct Node {
     drawable: bool,
 }
 
+/// A cached tile: its data, and its colour once that arrived in a load of its own.
+struct Cached {
+    data: Arc<TerrainData>,
+    colour: Option<Arc<ColourImage>>,
+}
+
+/// A loaded tile's colour, as the renderer should take it.
+#[derive(Clone, Copy, Debug)]
+pub enum TileColour<'a> {
+    /// The tile's own colour.
+    Ready(&'a ColourImage),
+    /// Loading on its own: show the nearest ancestor's meanwhile.
+    Loading,
+    /// The source has none of its own for this tile, or it failed: the nearest ancestor's
+    /// stays.
+    Borrowed,
+}
+
 /// A terrain layer: scheduler, cache and oracle over any [`TerrainSource`].
 pub struct TerrainLayer {
     scheduler: Scheduler<dyn TerrainSource>,
-    cache: LruCache<Arc<TerrainData>>,
+    cache: LruCache<Cached>,
+    /// Separate colour loads, started with the first tile that needs one.
+    colours: Option<ColourChannel>,
+    workers: usize,
     nodes: FxHashMap<TileKey, Node>,
     /// Tiles the source said it has no data for: never asked again, even after their
     /// records were dropped with an evicted parent.
@@ -115,7 +143,7 @@ pub struct TerrainLayer {
     /// Load and draw bookkeeping, when a benchmark asked for it.
     usage: Option<Usage>,
     /// Tiles that failed: when they may be asked for again, and how often they failed.
-    failures: FxHashMap<TileKey, (Instant, u32)>,
+    failures: Failures,
     ellipsoid: Ellipsoid,
     occluder: Ellipsoid,
     height_range_m: (f64, f64),
@@ -133,10 +161,12 @@ impl TerrainLayer {
         let mut layer = Self {
             scheduler: Scheduler::new(source, options.workers),
             cache: LruCache::new(options.cache_bytes),
+            colours: None,
+            workers: options.workers,
             nodes: FxHashMap::default(),
             no_data: FxHashSet::default(),
             usage: None,
-            failures: FxHashMap::default(),
+            failures: Failures::default(),
             ellipsoid,
             occluder,
             height_range_m,
@@ -180,7 +210,33 @@ impl TerrainLayer {
 
     /// A loaded tile.
     pub fn get(&self, key: TileKey) -> Option<&Arc<TerrainData>> {
-        self.cache.get(key)
+        self.cache.get(key).map(|c| &c.data)
+    }
+
+    /// The colour of a loaded tile (`None` if it is not loaded).
+    pub fn colour(&self, key: TileKey) -> Option<TileColour<'_>> {
+        let c = self.cache.get(key)?;
+        Some(if !c.data.colour_separate {
+            TileColour::Ready(&c.data.tile.colour)
+        } else if let Some(colour) = &c.colour {
+            TileColour::Ready(colour)
+        } else if self.colours.as_ref().is_some_and(|ch| !ch.may_ask(key)) {
+            TileColour::Borrowed
+        } else {
+            TileColour::Loading
+        })
+    }
+
+    /// Colour loads queued or in flight.
+    pub fn colours_loading(&self) -> usize {
+        self.colours.as_ref().map_or(0, ColourChannel::loading)
+    }
+
+    /// Counters of the colour scheduler (zero until a tile needed a separate colour).
+    pub fn colour_scheduler_stats(&self) -> SchedulerStats {
+        self.colours
+            .as_ref()
+            .map_or_else(SchedulerStats::default, |c| c.scheduler.stats())
     }
 
     /// Starts remembering every tile loaded and drawn (for benchmarks: it grows with the
@@ -231,6 +287,7 @@ impl TerrainLayer {
             stats.arrived += 1;
             self.accept(key, outcome);
         }
+        stats.colours_arrived = self.take_colours() as u32;
         let evicted = self
             .cache
             .evict_to_budget(|k, last_used| last_used == now || k.level() == 0);
@@ -242,7 +299,9 @@ impl TerrainLayer {
         // lowers detail until it does); otherwise replace the wanted list.
         if self.cache.is_over_budget() {
             self.scheduler.submit(&[]);
+            self.request_colours(&[], &[]);
         } else {
+            self.request_colours(drawn, wanted);
             // The caller split its list before this update took in what arrived: tiles that
             // just arrived must not be asked for again.
             let missing: Vec<TileRequest> = wanted
@@ -253,16 +312,82 @@ impl TerrainLayer {
             self.scheduler.submit(&missing);
         }
         stats.loading = self.loading() as u32;
+        stats.colours_loading = self.colours_loading() as u32;
         stats.cached = self.cache.len() as u32;
         stats.cached_bytes = self.cache.bytes();
         stats.over_budget = self.cache.is_over_budget();
         stats
     }
 
+    /// Asks for the colour of the drawn tiles, then of the wanted ones already loaded, that
+    /// lack their own (replacing the previous list: colours nobody shows any more are
+    /// cancelled).
+    fn request_colours(&mut self, drawn: &[DrawTile], wanted: &[TileRequest]) {
+        let mut tiles = FxHashMap::default();
+        let mut requests = Vec::new();
+        let candidates = drawn
+            .iter()
+            .map(|d| (d.key, d.sse_px))
+            .chain(wanted.iter().map(|r| (r.key, r.priority)));
+        for (key, priority) in candidates {
+            let Some(c) = self.cache.get(key) else {
+                continue;
+            };
+            if !c.data.colour_separate
+                || c.colour.is_some()
+                || self.colours.as_ref().is_some_and(|ch| !ch.may_ask(key))
+            {
+                continue;
+            }
+            if tiles.insert(key, Arc::clone(&c.data)).is_none() {
+                requests.push(TileRequest { key, priority });
+            }
+        }
+        if requests.is_empty() && self.colours.is_none() {
+            return;
+        }
+        let source = Arc::clone(self.scheduler.source());
+        let workers = self.workers;
+        self.colours
+            .get_or_insert_with(|| ColourChannel::new(source, workers))
+            .submit(tiles, &requests);
+    }
+
+    /// Takes in the colours that arrived; returns how many.
+    fn take_colours(&mut self) -> usize {
+        let Some(ch) = &mut self.colours else {
+            return 0;
+        };
+        let arrived = ch.scheduler.drain();
+        let n = arrived.len();
+        for (key, outcome) in arrived {
+            match outcome {
+                Outcome::Loaded(colour) => {
+                    ch.failures.clear(key);
+                    let Some(c) = self.cache.get_mut(key) else {
+                        continue;
+                    };
+                    let bytes = c.data.byte_size() + colour.byte_size();
+                    c.colour = Some(colour);
+                    self.cache.resize(key, bytes);
+                    if let Some(u) = &mut self.usage {
+                        u.stats.colours_loaded += 1;
+                    }
+                }
+                Outcome::NoData => ch.no_colour(key),
+                Outcome::Failed(e) => {
+                    eprintln!("globus: {e}");
+                    ch.failures.record(key);
+                }
+            }
+        }
+        n
+    }
+
     fn accept(&mut self, key: TileKey, outcome: Outcome<TerrainData>) {
         let state = match outcome {
             Outcome::Loaded(data) => {
-                self.failures.remove(&key);
+                self.failures.clear(key);
                 if let Some(u) = &mut self.usage {
                     u.stats.loaded += 1;
                     if !data.generated {
@@ -302,11 +427,12 @@ impl TerrainLayer {
                     }
                 }
                 self.nodes.insert(key, node);
-                self.cache.insert(key, data, bytes, self.frame);
+                let cached = Cached { data, colour: None };
+                self.cache.insert(key, cached, bytes, self.frame);
                 return;
             }
             Outcome::NoData => {
-                if self.no_data.len() >= MAX_NO_DATA_KEYS {
+                if self.no_data.len() >= MAX_REMEMBERED_KEYS {
                     self.no_data.clear();
                 }
                 self.no_data.insert(key);
@@ -314,15 +440,7 @@ impl TerrainLayer {
             }
             Outcome::Failed(e) => {
                 eprintln!("globus: {e}");
-                let failures = self.failures.get(&key).map_or(0, |f| f.1) + 1;
-                let wait = FAILED_RETRY_AFTER
-                    .saturating_mul(1 << (failures - 1).min(5))
-                    .min(FAILED_RETRY_MAX);
-                if self.failures.len() >= MAX_NO_DATA_KEYS {
-                    let now = Instant::now();
-                    self.failures.retain(|_, f| f.0 > now);
-                }
-                self.failures.insert(key, (Instant::now() + wait, failures));
+                self.failures.record(key);
                 TileState::Failed
             }
         };
@@ -363,7 +481,7 @@ impl TerrainLayer {
     /// An estimated record for an unloaded tile: bounds from the parent's heights if it is
     /// loaded, else from the rectangle and the source's height range.
     fn estimate(&self, key: TileKey) -> Node {
-        let parent = key.parent().and_then(|p| self.cache.get(p));
+        let parent = key.parent().and_then(|p| self.get(p));
         let bounds = match parent {
             Some(p) => p.child_bounds[key.child_index()],
             None => {
@@ -388,22 +506,26 @@ impl TerrainLayer {
     /// has; returns how many arrived. For offline rendering, which waits on purpose.
     pub fn wait_for_tiles(&mut self, timeout: Duration) -> usize {
         let deadline = Instant::now() + timeout;
-        let mut n = 0;
-        if let Some((key, outcome)) = self.scheduler.wait_one(timeout) {
-            self.accept(key, outcome);
-            n += 1;
-        }
-        while Instant::now() < deadline {
-            let more = self.scheduler.drain();
-            if more.is_empty() {
-                break;
-            }
-            for (key, outcome) in more {
+        loop {
+            let mut n = self.take_colours();
+            for (key, outcome) in self.scheduler.drain() {
                 self.accept(key, outcome);
                 n += 1;
             }
+            let now = Instant::now();
+            if n > 0 || now >= deadline {
+                return n;
+            }
+            // Block on terrain, looking at colours every few milliseconds.
+            let mut slice = deadline - now;
+            if self.colours.is_some() {
+                slice = slice.min(COLOUR_POLL);
+            }
+            if let Some((key, outcome)) = self.scheduler.wait_one(slice) {
+                self.accept(key, outcome);
+                return 1 + self.wait_for_tiles(Duration::ZERO);
+            }
         }
-        n
     }
 }
 
@@ -423,14 +545,7 @@ impl TileOracle for TerrainLayer {
             TileState::Loaded if !node.drawable => TileState::Unloaded,
             TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
             // A failed tile is asked for again after its cool-down (a server may recover).
-            TileState::Failed
-                if self
-                    .failures
-                    .get(&key)
-                    .is_some_and(|f| Instant::now() >= f.0) =>
-            {
-                TileState::Unloaded
-            }
+            TileState::Failed if self.failures.ready_again(key) => TileState::Unloaded,
             s => s,
         };
         TileInfo {
@@ -486,19 +601,26 @@ mod tests {
         };
         layer.accept(key, Outcome::Failed(failure.clone()));
         assert_eq!(layer.tile(key).state, TileState::Failed);
-        let (retry_at, count) = layer.failures[&key];
+        let (retry_at, count) = layer.failures.get(key).expect("recorded");
         assert_eq!(count, 1);
-        assert!(retry_at >= Instant::now() + FAILED_RETRY_AFTER - Duration::from_secs(1));
+        assert!(
+            retry_at
+                >= Instant::now() + crate::colour_jobs::FAILED_RETRY_AFTER - Duration::from_secs(1)
+        );
         // Once the cool-down has passed, selection sees it as not loaded (and asks again).
         layer
             .failures
-            .insert(key, (Instant::now() - Duration::from_millis(1), 1));
+            .set(key, Instant::now() - Duration::from_millis(1), 1);
         assert_eq!(layer.tile(key).state, TileState::Unloaded);
         // A second failure waits twice as long.
         layer.accept(key, Outcome::Failed(failure));
-        let (retry_at, count) = layer.failures[&key];
+        let (retry_at, count) = layer.failures.get(key).expect("recorded");
         assert_eq!(count, 2);
-        assert!(retry_at >= Instant::now() + 2 * FAILED_RETRY_AFTER - Duration::from_secs(1));
+        assert!(
+            retry_at
+                >= Instant::now() + 2 * crate::colour_jobs::FAILED_RETRY_AFTER
+                    - Duration::from_secs(1)
+        );
     }
 
     #[test]

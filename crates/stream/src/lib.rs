@@ -9,6 +9,7 @@
 //! selection's questions as a [`globus_tiling::TileOracle`].
 
 mod cache;
+mod colour_jobs;
 pub mod decode;
 pub mod fetch;
 mod layer;
@@ -21,7 +22,7 @@ mod scheduler;
 mod source;
 
 pub use cache::LruCache;
-pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions, UsageStats};
+pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions, TileColour, UsageStats};
 pub use procedural::ProceduralSource;
 pub use raster_terrain::RasterTerrainSource;
 pub use refined::RefinedSource;

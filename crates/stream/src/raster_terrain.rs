@@ -13,6 +13,9 @@
 //! * **Imagery** layers are composited bottom to top with alpha into the tile's colour image,
 //!   each read at the level matching the tile's texel size (Web Mercator reprojected per
 //!   texel; beyond its 85 degree limit the edge row). Without imagery, heights are tinted.
+//!   Below the roots the colour is a load of its own ([`TerrainSource::load_colour`]), so a
+//!   tile's geometry does not wait for its imagery: the renderer shows the nearest ancestor's
+//!   colour meanwhile, and the roots (which carry theirs) guarantee there is one.
 //! * The one-sample ring round the grid (for normals) is extrapolated linearly from inside:
 //!   neighbours' tiles are not fetched for it.
 
@@ -351,6 +354,11 @@ impl RasterTerrainSource {
         Ok(ColourImage::with_mips(COLOUR_SIZE, px))
     }
 
+    /// Whether a tile's imagery loads on its own: with imagery layers, below the roots.
+    fn colour_separate(&self, key: TileKey) -> bool {
+        !self.imagery.is_empty() && key.level() > 0
+    }
+
     fn build(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainTile>, FetchError> {
         let rect = TilingScheme::Geographic.rect(key);
         let Some(fine) = self.heights(key, &rect, cancel)? else {
@@ -391,7 +399,13 @@ impl RasterTerrainSource {
                 deviation = deviation.max((fine_at(i, j) - mesh).abs());
             }
         }
-        let colour = self.colour(&rect, &heights, cancel)?;
+        let colour = if self.colour_separate(key) {
+            // A stand-in (never drawn): the real colour is a load of its own.
+            let mean = heights.iter().map(|&h| f64::from(h)).sum::<f64>() / heights.len() as f64;
+            ColourImage::with_mips(1, tint(mean).to_vec())
+        } else {
+            self.colour(&rect, &heights, cancel)?
+        };
         let (lo, hi) = heights
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
@@ -554,11 +568,10 @@ impl TileSource for RasterTerrainSource {
             return Ok(None);
         }
         let tile = self.build(key, cancel).map_err(|e| self.fail(key, e))?;
-        Ok(
-            tile.map(|t| {
-                TerrainData::build(t, &self.ellipsoid, &self.occluder, &self.mesh_options)
-            }),
-        )
+        Ok(tile.map(|t| TerrainData {
+            colour_separate: self.colour_separate(key),
+            ..TerrainData::build(t, &self.ellipsoid, &self.occluder, &self.mesh_options)
+        }))
     }
 
     fn byte_size(&self, tile: &TerrainData) -> usize {
@@ -581,6 +594,17 @@ impl TerrainSource for RasterTerrainSource {
         self.colour(&rect, &flat, cancel)
             .map(Some)
             .map_err(|e| self.fail(key, e))
+    }
+
+    fn load_colour(
+        &self,
+        data: &TerrainData,
+        cancel: &Cancel,
+    ) -> Result<Option<ColourImage>, SourceError> {
+        let t = &data.tile;
+        self.colour(&t.rect, &t.heights_m, cancel)
+            .map(Some)
+            .map_err(|e| self.fail(t.key, e))
     }
 
     fn ellipsoid(&self) -> &Ellipsoid {

@@ -74,10 +74,24 @@ impl RefinedSource {
                     return Ok(found);
                 }
             } else {
-                let loaded = self
-                    .inner
-                    .load(candidate, cancel)?
-                    .map(|d| Arc::new(d.tile));
+                let loaded = match self.inner.load(candidate, cancel)? {
+                    Some(mut d) => {
+                        // Refinement textures the base's real colour, so a base whose
+                        // imagery loads separately gets it now.
+                        if d.colour_separate {
+                            d.tile.colour =
+                                self.inner.load_colour(&d, cancel)?.ok_or_else(|| {
+                                    SourceError::Failed {
+                                        key: candidate,
+                                        source_name: self.name.clone(),
+                                        message: "no colour for a base tile".into(),
+                                    }
+                                })?;
+                        }
+                        Some(Arc::new(d.tile))
+                    }
+                    None => None,
+                };
                 self.remember(candidate, loaded.clone());
                 if loaded.is_some() {
                     return Ok(loaded);
@@ -164,6 +178,19 @@ impl TileSource for RefinedSource {
 }
 
 impl TerrainSource for RefinedSource {
+    fn load_colour(
+        &self,
+        data: &TerrainData,
+        cancel: &Cancel,
+    ) -> Result<Option<globus_terrain::ColourImage>, SourceError> {
+        // Refined tiles come with their colour; the inner source's tiles may not.
+        if data.tile.key.level() <= self.data_level {
+            self.inner.load_colour(data, cancel)
+        } else {
+            Ok(None)
+        }
+    }
+
     fn ellipsoid(&self) -> &Ellipsoid {
         self.inner.ellipsoid()
     }

@@ -85,6 +85,18 @@ pub trait TerrainSource: TileSource<Tile = TerrainData> {
         let _ = (key, cancel);
         Ok(None)
     }
+    /// The colour of a tile loaded with [`TerrainData::colour_separate`] set: the source's
+    /// imagery for it (fetched and composited now, on a worker thread of its own scheduler, so
+    /// a tile's geometry is drawn before its imagery arrives). `None`: the source has no
+    /// colour of its own for this tile, and the nearest ancestor's stays.
+    fn load_colour(
+        &self,
+        data: &TerrainData,
+        cancel: &Cancel,
+    ) -> Result<Option<globus_terrain::ColourImage>, SourceError> {
+        let _ = (data, cancel);
+        Ok(None)
+    }
 }
 
 /// A terrain tile ready for selection and rendering: its data, its mesh, and conservative
@@ -101,6 +113,10 @@ pub struct TerrainData {
     /// Made here (procedural planet, refinement below the data) rather than from data
     /// fetched for it: no request was sent for this tile.
     pub generated: bool,
+    /// The tile's imagery loads on its own ([`TerrainSource::load_colour`]), after its
+    /// geometry: `tile.colour` is only a one-texel stand-in (never drawn), and the renderer
+    /// shows the nearest ancestor's colour, cropped and scaled, until the tile's own arrives.
+    pub colour_separate: bool,
 }
 
 impl TerrainData {
@@ -121,6 +137,7 @@ impl TerrainData {
             mesh,
             child_bounds,
             generated: false,
+            colour_separate: false,
         }
     }
 

@@ -600,6 +600,32 @@ fn write_pyramid(
     std::fs::write(dir.join("metadata.json"), meta.to_string()).expect("metadata");
 }
 
+/// Terrain from the server's `/dem` pyramid draped with its `/img` pyramid (heights 0-200 m).
+fn dem_and_imagery(server: &FaultServer, http: HttpOptions) -> RasterTerrainSource {
+    use globus_stream::open::imagery_pyramid;
+    let http = client(http);
+    let open = |path: &str, kind| {
+        open_layer(
+            &SourceSpec::parse(&server.url(path)).expect("spec"),
+            kind,
+            &http,
+            None,
+        )
+        .expect("layer")
+    };
+    let dem = elevation_pyramid(open("/dem", LayerKind::Elevation), DecodeLimits::default())
+        .expect("dem");
+    let img = imagery_pyramid(open("/img", LayerKind::Imagery), DecodeLimits::default());
+    RasterTerrainSource::new(
+        vec![dem],
+        vec![img],
+        Ellipsoid::WGS84,
+        (0.0, 200.0),
+        MeshOptions::default(),
+    )
+    .expect("source")
+}
+
 /// A solid colour naming a tile: red = 20 * level, green = x, blue = y.
 fn key_colour(k: TileKey) -> [u8; 4] {
     [
@@ -620,7 +646,6 @@ fn quadrant_texel(c: &globus_terrain::ColourImage) -> [u8; 3] {
 #[test]
 fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors() {
     use globus_stream::RefinedSource;
-    use globus_stream::open::imagery_pyramid;
     use globus_terrain::refine::RefineOptions;
 
     let base = scratch("imagery-depth");
@@ -665,27 +690,7 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
     )
     .expect("broken tile");
     let server = FaultServer::serve_dir(&base);
-    let http = client(HttpOptions::default());
-    let open = |path: &str, kind| {
-        open_layer(
-            &SourceSpec::parse(&server.url(path)).expect("spec"),
-            kind,
-            &http,
-            None,
-        )
-        .expect("layer")
-    };
-    let dem = elevation_pyramid(open("/dem", LayerKind::Elevation), DecodeLimits::default())
-        .expect("dem");
-    let img = imagery_pyramid(open("/img", LayerKind::Imagery), DecodeLimits::default());
-    let raster = RasterTerrainSource::new(
-        vec![dem],
-        vec![img],
-        Ellipsoid::WGS84,
-        (0.0, 200.0),
-        MeshOptions::default(),
-    )
-    .expect("source");
+    let raster = dem_and_imagery(&server, HttpOptions::default());
     // Elevation data ends at engine level 5 (256-sample level-2 tiles); refinement below.
     assert_eq!(raster.max_level(), 5);
     let refined = RefinedSource::new(
@@ -769,7 +774,12 @@ fn web_mercator_imagery_leaves_no_hole_or_smear_at_the_poles() {
         (TileKey::new(2, 5, 3), [255, 255, 255]),
     ] {
         let t = source.load(key, &cancel).expect("load").expect("tile");
-        let c = &t.tile.colour;
+        // Below the roots imagery is a load of its own.
+        assert!(t.colour_separate && t.tile.colour.size == 1, "{key}");
+        let c = &source
+            .load_colour(&t, &cancel)
+            .expect("colour")
+            .expect("imagery there");
         let s = c.size as usize;
         // Texel rows beyond 86.05 degrees (the limit plus the blend): the top (or bottom)
         // 128 * (90 - 86.06) / 45 = 11 rows, the rows nearest the pole first.
@@ -889,4 +899,129 @@ fn wms_and_subdomain_templates_against_a_loopback_server() {
         hosts[1].split(' ').nth(1).map(|h| h.split(':').next()),
         "neighbouring tiles go to different hosts: {hosts:?}"
     );
+}
+
+#[test]
+fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
+    use globus_stream::{TerrainLayer, TerrainLayerOptions, TileColour};
+    use globus_tiling::{DrawTile, TileRequest};
+
+    let base = scratch("imagery-apart");
+    let terrarium = ElevationEncoding::Terrarium.encode(100.0);
+    write_pyramid(
+        &base.join("dem"),
+        TilingScheme::Geographic,
+        1,
+        256,
+        "corners",
+        Some("terrarium"),
+        &[],
+        None,
+        |_, _, _| [terrarium[0], terrarium[1], terrarium[2], 255],
+    );
+    write_pyramid(
+        &base.join("img"),
+        TilingScheme::Geographic,
+        3,
+        64,
+        "cells",
+        None,
+        &[],
+        None,
+        |k, _, _| key_colour(k),
+    );
+    let server = FaultServer::serve_dir(&base);
+    // Imagery is slow; one tile's imagery stalls for good (the first matching rule holds).
+    let stalled = TileKey::new(3, 12, 2);
+    server.add_fault(
+        &format!("/img/3/{}/{}.png", stalled.x(), stalled.y()),
+        Fault::Delay(Duration::from_secs(30)),
+        None,
+    );
+    server.add_fault("/img/", Fault::Delay(Duration::from_millis(300)), None);
+    // A response that does not start within 2 s ends the load (the wait for headers is not
+    // interruptible; reads are).
+    let source = dem_and_imagery(
+        &server,
+        HttpOptions {
+            response_timeout: Duration::from_secs(2),
+            ..HttpOptions::default()
+        },
+    );
+    let mut layer = TerrainLayer::new(
+        Arc::new(source),
+        TerrainLayerOptions {
+            cache_bytes: 64 << 20,
+            workers: 2,
+        },
+    );
+    layer.track_usage();
+    // 128-texel engine tiles at level 2 take 64-pixel imagery of level 3: the north-west
+    // quadrant of 2/4/1 is imagery tile 3/8/2.
+    let (tile, other) = (TileKey::new(2, 4, 1), TileKey::new(2, 6, 1));
+    let wanted = [tile, other].map(|key| TileRequest {
+        key,
+        priority: 10.0,
+    });
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while layer.get(tile).is_none() || layer.get(other).is_none() {
+        assert!(Instant::now() < deadline, "terrain never arrived");
+        layer.update(&[], &wanted);
+        layer.wait_for_tiles(Duration::from_millis(50));
+    }
+    // The geometry came although the other tile's imagery stalls: it did not wait for it.
+    assert!(matches!(layer.colour(other), Some(TileColour::Loading)));
+
+    // Drawn, the tiles' colours are asked for and arrive on their own.
+    let drawn = [tile, other].map(|key| DrawTile {
+        key,
+        sse_px: 4.0,
+        distance_m: 1e6,
+    });
+    while !matches!(layer.colour(tile), Some(TileColour::Ready(_))) {
+        assert!(Instant::now() < deadline, "imagery never arrived");
+        layer.update(&drawn, &[]);
+        layer.wait_for_tiles(Duration::from_millis(50));
+    }
+    let Some(TileColour::Ready(colour)) = layer.colour(tile) else {
+        unreachable!()
+    };
+    let want = key_colour(TileKey::new(3, 8, 2));
+    assert_eq!(quadrant_texel(colour), [want[0], want[1], want[2]]);
+    let colour_bytes = colour.byte_size();
+    let stats = layer.update(&drawn, &[]);
+    assert_eq!(layer.usage().map(|u| u.colours_loaded), Some(1));
+    let data_bytes: usize = [tile, other]
+        .iter()
+        .map(|&k| layer.get(k).expect("loaded").byte_size())
+        .sum();
+    assert_eq!(
+        stats.cached_bytes,
+        data_bytes + colour_bytes,
+        "the colour counts in the budget"
+    );
+    // The other tile's imagery (3/12/2 stalls) is still loading, its terrain long drawn.
+    assert!(matches!(layer.colour(other), Some(TileColour::Loading)));
+    assert_eq!(stats.colours_loading, 1);
+
+    // Nobody draws it any more: its colour load is cancelled, not left to finish.
+    let before = layer.colour_scheduler_stats();
+    layer.update(&[], &[]);
+    let after = layer.colour_scheduler_stats();
+    assert_eq!(
+        after.cancelled + after.cancelled_in_flight,
+        before.cancelled + before.cancelled_in_flight + 1,
+        "{after:?}"
+    );
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while layer.colours_loading() > 0 {
+        assert!(
+            Instant::now() < deadline,
+            "cancelled colour load still running"
+        );
+        layer.update(&[], &[]);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(matches!(layer.colour(other), Some(TileColour::Loading)));
+    let _ = std::fs::remove_dir_all(&base);
 }

@@ -1,7 +1,9 @@
 // Terrain: every tile's mesh from the shared vertex and index pools, all drawn by one
 // multi-draw-indirect. Positions are f32 offsets from the tile's centre; each vertex carries
 // its tile's slot, which gives the centre-to-eye offset computed in f64 on the CPU (so
-// nothing large reaches f32) and the layer of the colour texture array.
+// nothing large reaches f32) and where its colour is: a layer of the colour texture array
+// and the part of it over the tile (the whole of its own layer, or a crop of an ancestor's
+// while its own imagery loads).
 
 struct VsIn {
     // Metres from the tile centre.
@@ -18,13 +20,15 @@ struct VsIn {
 @group(1) @binding(0) var<storage, read> offsets: array<vec4<f32>>;
 @group(1) @binding(1) var colours: texture_2d_array<f32>;
 @group(1) @binding(2) var colour_sampler: sampler;
+// Per slot: uv scale, uv offset (u, v), colour layer.
+@group(1) @binding(3) var<storage, read> colour_maps: array<vec4<f32>>;
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) uv: vec2<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) eye_offset: vec3<f32>,
-    @location(3) @interpolate(flat) slot: u32,
+    @location(3) @interpolate(flat) layer: u32,
 }
 
 @vertex
@@ -32,16 +36,17 @@ fn vs_main(v: VsIn) -> VsOut {
     let eye_offset = offsets[v.slot].xyz + v.position;
     var out: VsOut;
     out.clip = frame.clip_from_eye * vec4<f32>(eye_offset, 1.0);
-    out.uv = v.uv;
+    let map = colour_maps[v.slot];
+    out.uv = v.uv * map.x + map.yz;
     out.normal = decode_oct(v.normal_oct);
     out.eye_offset = eye_offset;
-    out.slot = v.slot;
+    out.layer = u32(map.w + 0.5);
     return out;
 }
 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
-    let texel = textureSample(colours, colour_sampler, in.uv, in.slot);
+    let texel = textureSample(colours, colour_sampler, in.uv, in.layer);
     let albedo = texel.rgb;
     let water = 1.0 - texel.a;
     let n = normalize(in.normal);
