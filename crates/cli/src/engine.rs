@@ -417,32 +417,13 @@ impl Globe {
                 TileColour::Loading | TileColour::Borrowed => None,
             };
             if own.is_none()
-                && let Some(source) = pool.colour_source(r.key)
+                && !colour_to_borrow(pool, queue, &self.layer, r.key, &mut evicted, &mut uploaded)
             {
-                // Keep what it borrows from for this frame.
-                pool.touch(source.from);
-            } else if own.is_none() {
-                // Nothing on the GPU to borrow from: the root (loaded with its colour, kept
-                // in the CPU cache) goes up first.
-                let root = r.key.ancestor_at(0);
-                let Some((root, Some(root_data), Some(TileColour::Ready(c)))) =
-                    root.map(|k| (k, self.layer.get(k), self.layer.colour(k)))
-                else {
-                    continue;
-                };
-                let placed = if pool.is_resident(root) {
-                    pool.upload_colour(queue, root, c)
-                } else {
-                    pool.upload(queue, root, &root_data.mesh, Some(c), &mut evicted)
-                        .is_some()
-                };
-                if !placed {
-                    continue;
-                }
-                uploaded.push(root);
-                if !pool.can_upload() {
-                    break;
-                }
+                continue;
+            }
+            // The root may have taken the frame's last upload.
+            if !pool.can_upload() {
+                break;
             }
             if pool
                 .upload(queue, r.key, &data.mesh, own, &mut evicted)
@@ -561,6 +542,41 @@ impl Globe {
             }
         }
     }
+}
+
+/// Makes sure a tile about to be uploaded without its own colour has colour to borrow on the
+/// GPU: the nearest ancestor's that is resident (kept for this frame), else the root's (loaded
+/// with its colour and never evicted from the CPU cache), uploaded now and pushed to
+/// `uploaded`. False if neither can be had this frame.
+fn colour_to_borrow(
+    pool: &mut TilePool,
+    queue: &wgpu::Queue,
+    layer: &TerrainLayer,
+    key: TileKey,
+    evicted: &mut Vec<TileKey>,
+    uploaded: &mut Vec<TileKey>,
+) -> bool {
+    if let Some(source) = pool.colour_source(key) {
+        pool.touch(source.from);
+        return true;
+    }
+    let Some(root) = key.ancestor_at(0) else {
+        return false;
+    };
+    let (Some(data), Some(TileColour::Ready(colour))) = (layer.get(root), layer.colour(root))
+    else {
+        return false;
+    };
+    let placed = if pool.is_resident(root) {
+        pool.upload_colour(queue, root, colour)
+    } else {
+        pool.upload(queue, root, &data.mesh, Some(colour), evicted)
+            .is_some()
+    };
+    if placed {
+        uploaded.push(root);
+    }
+    placed
 }
 
 /// Bilinear height of a tile's grid at a longitude and latitude inside it.

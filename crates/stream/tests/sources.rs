@@ -626,6 +626,22 @@ fn dem_and_imagery(server: &FaultServer, http: HttpOptions) -> RasterTerrainSour
     .expect("source")
 }
 
+/// A geographic Terrarium pyramid of 256-sample corner grids to `max_level`, flat at 100 m.
+fn write_flat_dem(dir: &Path, max_level: u8) {
+    let terrarium = ElevationEncoding::Terrarium.encode(100.0);
+    write_pyramid(
+        dir,
+        TilingScheme::Geographic,
+        max_level,
+        256,
+        "corners",
+        Some("terrarium"),
+        &[],
+        None,
+        |_, _, _| [terrarium[0], terrarium[1], terrarium[2], 255],
+    );
+}
+
 /// A solid colour naming a tile: red = 20 * level, green = x, blue = y.
 fn key_colour(k: TileKey) -> [u8; 4] {
     [
@@ -651,18 +667,7 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
     let base = scratch("imagery-depth");
     // Elevation to level 2 (a flat 100 m), imagery in 64-pixel tiles to level 8 (over six
     // degrees square only): each imagery tile one colour.
-    let terrarium = ElevationEncoding::Terrarium.encode(100.0);
-    write_pyramid(
-        &base.join("dem"),
-        TilingScheme::Geographic,
-        2,
-        256,
-        "corners",
-        Some("terrarium"),
-        &[],
-        None,
-        |_, _, _| [terrarium[0], terrarium[1], terrarium[2], 255],
-    );
+    write_flat_dem(&base.join("dem"), 2);
     let region = globus_tiling::GeoRect::from_degrees(8.0, 54.0, 14.0, 60.0);
     let geo = TilingScheme::Geographic;
     let engine = |lon: f64, lat: f64| {
@@ -907,18 +912,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
     use globus_tiling::{DrawTile, TileRequest};
 
     let base = scratch("imagery-apart");
-    let terrarium = ElevationEncoding::Terrarium.encode(100.0);
-    write_pyramid(
-        &base.join("dem"),
-        TilingScheme::Geographic,
-        1,
-        256,
-        "corners",
-        Some("terrarium"),
-        &[],
-        None,
-        |_, _, _| [terrarium[0], terrarium[1], terrarium[2], 255],
-    );
+    write_flat_dem(&base.join("dem"), 1);
     write_pyramid(
         &base.join("img"),
         TilingScheme::Geographic,
