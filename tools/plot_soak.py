@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Plots a `globus bench --soak` log (JSON lines) as a PNG: resident memory, the decoded-tile
-cache and its budget over time, and tiles resident on the GPU (right axis, scaled to the pool's
-capacity). Needs Pillow only.
+"""Plots a `globus bench --soak` log (JSON lines) as a PNG: resident memory against the total
+memory budget, the loaded-tile cache and its share of the budget, the sources' caches, and tiles
+resident on the GPU (right axis, scaled to the pool's capacity). Needs Pillow only.
 
     python3 tools/plot_soak.py SOAK.jsonl OUT.png
 """
@@ -19,7 +19,11 @@ def main():
     img = Image.new("RGB", (W, H), "white")
     d = ImageDraw.Draw(img)
     t_max = max(r["t_s"] for r in samples) or 1.0
-    y_max = max(max(r["rss_mib"] for r in samples), max(r["cache_budget_mib"] for r in samples)) * 1.15
+    def val(r, key):
+        v = r.get(key)
+        return v if isinstance(v, (int, float)) else 0.0
+
+    y_max = max(max(val(r, k) for r in samples) for k in ("rss_mib", "cache_budget_mib", "memory_budget_mib")) * 1.15
     cap = max(r["gpu_capacity"] for r in samples) or 1
 
     def x(t):
@@ -41,19 +45,24 @@ def main():
         d.text((x(t) - 12, H - B + 10), f"{t / 60:.1f} min", fill="black")
 
     def line(key, colour, top=y_max):
-        pts = [(x(r["t_s"]), y(r[key], top)) for r in samples]
+        pts = [(x(r["t_s"]), y(val(r, key), top)) for r in samples]
         d.line(pts, fill=colour, width=2)
 
+    if any(val(r, "memory_budget_mib") > 0 for r in samples):
+        line("memory_budget_mib", "red")
     line("cache_budget_mib", "orange")
     line("cache_mib", "green")
+    line("source_caches_mib", "grey")
     line("rss_mib", "blue")
     line("gpu_tiles", "purple", cap)
-    d.text((L + 10, 12), "resident memory (blue), decoded-tile cache (green) and its budget (orange), "
-           "GPU tiles resident (purple, right axis)", fill="black")
+    d.text((L + 10, 12), "resident memory (blue) and the memory budget (red); loaded-tile cache (green) "
+           "and its share (orange); sources' caches (grey); GPU tiles (purple, right axis)", fill="black")
     if summary:
         d.text((L + 10, 28), f"{summary['seconds'] / 60:.0f} min, {summary['frames']} frames, "
                f"{summary['loaded']} tiles loaded, {summary['failed']} failed, {summary['retries']} retries, "
-               f"max RSS {summary['max_rss_mib']:.0f} MiB", fill="black")
+               f"max RSS {summary['max_rss_mib']:.0f} MiB"
+               + (f" of a {summary['memory_budget_mib']:.0f} MiB budget" if summary.get("memory_budget_mib") else ""),
+               fill="black")
     img.save(sys.argv[2])
 
 

@@ -4,8 +4,9 @@
 //!
 //! ```toml
 //! sse = 2.0                 # screen-space error bound, pixels
-//! cache_mb = 512            # decoded tiles kept in RAM
-//! gpu_tiles = 1024          # tile slots in the GPU pools
+//! memory_mb = 1024          # everything Globus holds, CPU and GPU: sizes the caches below
+//! # cache_mb = 512          # or size the two big parts yourself (not with memory_mb):
+//! # gpu_tiles = 1024        #   loaded tiles kept in RAM, tile slots in the GPU pools
 //! workers = 16              # loader threads (also the most requests in flight)
 //! refine_to_level = 22      # procedural detail below the data, down to this level
 //! request_lookahead_frames = 3  # a moving camera skips tiles it leaves within 3 frames
@@ -48,6 +49,8 @@ use crate::engine::GlobeOptions;
 pub struct Config {
     /// Screen-space error bound, pixels.
     pub sse: Option<f64>,
+    /// One budget for all memory, MiB ([`crate::memory`]).
+    pub memory_mb: Option<u64>,
     /// CPU cache budget, MiB.
     pub cache_mb: Option<u64>,
     /// GPU tile slots.
@@ -128,8 +131,18 @@ impl Config {
         {
             bail!("sse = {s} must be above 0 and at most 1000 pixels");
         }
-        if self.gpu_tiles == Some(0) || self.workers == Some(0) || self.cache_mb == Some(0) {
-            bail!("gpu_tiles, workers and cache_mb must be above 0");
+        if self.gpu_tiles == Some(0)
+            || self.workers == Some(0)
+            || self.cache_mb == Some(0)
+            || self.memory_mb == Some(0)
+        {
+            bail!("memory_mb, gpu_tiles, workers and cache_mb must be above 0");
+        }
+        if self.memory_mb.is_some() && self.sizes_caches() {
+            bail!(
+                "memory_mb sizes the tile cache and the GPU pools itself: give memory_mb, or \
+                 cache_mb and gpu_tiles, not both"
+            );
         }
         if let Some(l) = self.refine_to_level
             && l > globus_tiling::TileKey::MAX_LEVEL
@@ -159,10 +172,19 @@ impl Config {
         Ok(())
     }
 
+    /// Whether the file sizes the tile cache or the GPU pools itself (so no total memory
+    /// budget applies).
+    pub fn sizes_caches(&self) -> bool {
+        self.cache_mb.is_some() || self.gpu_tiles.is_some()
+    }
+
     /// Applies the file to `options` (before command-line flags are).
     pub fn apply(&self, options: &mut GlobeOptions) {
         if let Some(s) = self.sse {
             options.max_sse_px = s;
+        }
+        if let Some(mb) = self.memory_mb {
+            options.memory_bytes = Some(mb << 20);
         }
         if let Some(mb) = self.cache_mb {
             options.cache_bytes = (mb as usize) << 20;
@@ -247,6 +269,10 @@ mod tests {
         c.apply(&mut o);
         assert_eq!(o.max_sse_px, 3.5);
         assert_eq!(o.cache_bytes, 256 << 20);
+        assert!(c.sizes_caches() && o.memory_bytes.is_none());
+        let mut m = GlobeOptions::default();
+        parse("memory_mb = 768").expect("valid").apply(&mut m);
+        assert_eq!(m.memory_bytes, Some(768 << 20));
         assert_eq!((o.gpu_slots, o.workers, o.max_level), (512, 12, 22));
         assert_eq!(o.request_lookahead_frames, 0.0);
         assert_eq!(o.http.user_agent, "test/1");
@@ -278,6 +304,9 @@ mod tests {
             "refine_to_level = 40",
             "request_lookahead_frames = -1",
             "request_lookahead_frames = nan",
+            "memory_mb = 0",
+            "memory_mb = 512\ncache_mb = 256",
+            "memory_mb = 512\ngpu_tiles = 256",
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }

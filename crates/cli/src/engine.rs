@@ -28,14 +28,19 @@ use globus_render::{
 };
 use globus_stream::decode::DecodeLimits;
 use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
-use globus_stream::open::{LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid, open_layer};
+use globus_stream::open::{
+    DEFAULT_LAYER_CACHE_BYTES, LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid,
+    open_layer,
+};
 use globus_stream::{
-    LayerStats, ProceduralSource, RasterTerrainSource, RefinedSource, TerrainLayer,
-    TerrainLayerOptions, TerrainSource, TileColour,
+    DEFAULT_BASE_CACHE_BYTES, LayerStats, ProceduralSource, RasterTerrainSource, RefinedSource,
+    TerrainLayer, TerrainLayerOptions, TerrainSource, TileColour,
 };
 use globus_terrain::MeshOptions;
 use globus_terrain::grid::{HEIGHT_GRID_SIDE, MESH_SEGMENTS};
 use globus_terrain::refine::RefineOptions;
+
+use crate::memory::{MemoryPlan, SourceBudgets, resident_bytes};
 use globus_tiling::{
     Selection, SelectionOptions, SelectionStats, TileKey, TileOracle, TileRequest, TilingScheme,
     select_into,
@@ -60,6 +65,10 @@ pub struct GlobeOptions {
     pub uploads_per_frame: u32,
     /// CPU cache budget, bytes.
     pub cache_bytes: usize,
+    /// One budget for all memory the globe holds ([`crate::memory`]): when set, it sizes
+    /// the tile cache, the GPU pools and the sources' caches, replacing `cache_bytes` and
+    /// `gpu_slots`.
+    pub memory_bytes: Option<u64>,
     /// Tile worker threads.
     pub workers: usize,
     /// How tile meshes are cut.
@@ -91,6 +100,7 @@ impl Default for GlobeOptions {
             gpu_slots: 1024,
             uploads_per_frame: 24,
             cache_bytes: TerrainLayerOptions::default().cache_bytes,
+            memory_bytes: None,
             workers: TerrainLayerOptions::default().workers,
             mesh: MeshOptions::default(),
             refine_below: None,
@@ -108,11 +118,41 @@ impl GlobeOptions {
     pub fn uses_real_data(&self) -> bool {
         !(self.terrain.is_empty() && self.imagery.is_empty())
     }
+
+    /// Loader threads of the terrain layer (its colour loads have as many again).
+    fn layer_workers(&self) -> usize {
+        // Loads from tile services mostly wait on the network: enough of them to keep two
+        // hosts at their concurrency limit.
+        if self.uses_real_data() {
+            self.workers.max(2 * self.http.per_host)
+        } else {
+            self.workers
+        }
+    }
+
+    /// Whether the terrain source keeps caches of its own (decoded source tiles, bases).
+    fn source_caches(&self) -> bool {
+        self.uses_real_data() || self.refine_below.is_some()
+    }
+
+    /// The sources' share of the memory budget (their defaults without one).
+    fn source_budgets(&self) -> SourceBudgets {
+        match self.memory_bytes {
+            Some(total) => SourceBudgets::of(total, self.terrain.len() + self.imagery.len()),
+            None => SourceBudgets {
+                per_layer: DEFAULT_LAYER_CACHE_BYTES,
+                refine_bases: DEFAULT_BASE_CACHE_BYTES,
+            },
+        }
+    }
 }
 
 /// Heights a real Earth's tiles may have before they are loaded (the deepest trench to above
 /// the highest peak): bounds unloaded tiles and places the horizon-culling body.
 const EARTH_HEIGHT_RANGE_M: (f64, f64) = (-11_000.0, 9_000.0);
+
+/// Vertex and index room of the GPU pools, as a fraction of every slot at full grid size.
+const GPU_POOL_FILL: f64 = 0.625;
 
 /// Default of [`Globe::request_lookahead_frames`].
 const REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
@@ -120,6 +160,7 @@ const REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
 /// The terrain source `options` describe: the procedural planet (optionally cut at a level
 /// and refined below), or real elevation and imagery layers refined below their data.
 pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainSource>> {
+    let budgets = options.source_budgets();
     if !options.uses_real_data() {
         return Ok(match options.refine_below {
             None => Arc::new(
@@ -129,12 +170,15 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
             Some(level) => {
                 let data = ProceduralSource::new(options.seed, level.min(options.max_level))
                     .with_mesh_options(options.mesh);
-                Arc::new(RefinedSource::new(
-                    Arc::new(data),
-                    RefineOptions::default(),
-                    options.max_level,
-                    options.mesh,
-                ))
+                Arc::new(
+                    RefinedSource::new(
+                        Arc::new(data),
+                        RefineOptions::default(),
+                        options.max_level,
+                        options.mesh,
+                    )
+                    .with_base_cache_bytes(budgets.refine_bases),
+                )
             }
         });
     }
@@ -152,11 +196,16 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
     let mut elevation = Vec::new();
     for spec in &options.terrain {
         let layer = open(spec, LayerKind::Elevation)?;
-        elevation.push(elevation_pyramid(layer, limits).map_err(anyhow::Error::msg)?);
+        elevation
+            .push(elevation_pyramid(layer, limits, budgets.per_layer).map_err(anyhow::Error::msg)?);
     }
     let mut imagery = Vec::new();
     for spec in &options.imagery {
-        imagery.push(imagery_pyramid(open(spec, LayerKind::Imagery)?, limits));
+        imagery.push(imagery_pyramid(
+            open(spec, LayerKind::Imagery)?,
+            limits,
+            budgets.per_layer,
+        ));
     }
     let raster = RasterTerrainSource::new(
         elevation,
@@ -166,12 +215,15 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
         options.mesh,
     )
     .map_err(anyhow::Error::msg)?;
-    Ok(Arc::new(RefinedSource::new(
-        Arc::new(raster),
-        RefineOptions::default(),
-        options.max_level,
-        options.mesh,
-    )))
+    Ok(Arc::new(
+        RefinedSource::new(
+            Arc::new(raster),
+            RefineOptions::default(),
+            options.max_level,
+            options.mesh,
+        )
+        .with_base_cache_bytes(budgets.refine_bases),
+    ))
 }
 
 /// What one frame did.
@@ -217,6 +269,23 @@ pub struct Globe {
     pub request_lookahead_frames: f64,
     /// The eye position of the previous frame.
     last_eye: Option<DVec3>,
+    /// How the memory budget is shared, if there is one.
+    memory: Option<MemoryPlan>,
+}
+
+/// The memory budget and what its parts hold ([`Globe::memory_use`]), bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryUse {
+    /// The plan, if the globe has a budget.
+    pub plan: Option<MemoryPlan>,
+    /// Loaded tiles in the cache.
+    pub tile_cache: u64,
+    /// The sources' own caches (decoded source tiles, refinement bases).
+    pub sources: u64,
+    /// The GPU pools (allocated in full at start).
+    pub gpu_pool: u64,
+    /// Resident memory of the whole process (Linux).
+    pub resident: Option<u64>,
 }
 
 impl Globe {
@@ -227,41 +296,48 @@ impl Globe {
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
     ) -> anyhow::Result<Self> {
-        Ok(Self::with_source(
-            device,
-            colour_format,
-            options,
-            terrain_source(options)?,
-        ))
+        Self::with_source(device, colour_format, options, terrain_source(options)?)
     }
 
     /// A globe over a terrain source opened beforehand (see [`terrain_source`]), so that a
-    /// source that cannot be opened fails before any window or GPU context exists.
+    /// source that cannot be opened fails before any window or GPU context exists. With a
+    /// memory budget, the process's footprint is measured now and the rest is shared out
+    /// ([`MemoryPlan`]); a budget too small for it fails here.
     pub fn with_source(
         device: &wgpu::Device,
         colour_format: wgpu::TextureFormat,
         options: &GlobeOptions,
         source: Arc<dyn TerrainSource>,
-    ) -> Self {
+    ) -> anyhow::Result<Self> {
+        let workers = options.layer_workers();
+        let pool_options = |slots| TilePoolOptions {
+            uploads_per_frame: options.uploads_per_frame,
+            ..TilePoolOptions::with_slots(slots, GPU_POOL_FILL)
+        };
+        let memory = match options.memory_bytes {
+            Some(total) => Some(
+                MemoryPlan::new(
+                    total,
+                    resident_bytes(),
+                    // The terrain layer's loaders and as many for colour.
+                    2 * workers,
+                    options.source_caches(),
+                    |slots| pool_options(slots).gpu_bytes(),
+                )
+                .map_err(anyhow::Error::msg)?,
+            ),
+            None => None,
+        };
         let layer = TerrainLayer::new(
             source,
             TerrainLayerOptions {
-                cache_bytes: options.cache_bytes,
-                // Loads from tile services mostly wait on the network: enough of them to keep
-                // two hosts at their concurrency limit.
-                workers: if options.uses_real_data() {
-                    options.workers.max(2 * options.http.per_host)
-                } else {
-                    options.workers
-                },
+                cache_bytes: memory.map_or(options.cache_bytes, |m| m.tile_cache as usize),
+                workers,
             },
         );
         let pool = TilePool::new(
             device,
-            TilePoolOptions {
-                uploads_per_frame: options.uploads_per_frame,
-                ..TilePoolOptions::with_slots(options.gpu_slots, 0.625)
-            },
+            pool_options(memory.map_or(options.gpu_slots, |m| m.gpu_slots)),
         );
         let selection_options = SelectionOptions {
             max_sse_px: options.max_sse_px,
@@ -269,7 +345,7 @@ impl Globe {
             near_m: 0.01,
             max_level: layer.max_level(),
         };
-        Self {
+        Ok(Self {
             layer,
             renderer: GlobeRenderer::new(device, colour_format, pool),
             options: selection_options,
@@ -279,6 +355,18 @@ impl Globe {
             relax_detail: true,
             request_lookahead_frames: options.request_lookahead_frames,
             last_eye: None,
+            memory,
+        })
+    }
+
+    /// The memory budget's plan (if the globe has one) and what each part holds now.
+    pub fn memory_use(&self) -> MemoryUse {
+        MemoryUse {
+            plan: self.memory,
+            tile_cache: self.layer.cache_bytes().0 as u64,
+            sources: self.layer.source().cached_bytes() as u64,
+            gpu_pool: self.renderer.pool.stats().gpu_bytes,
+            resident: resident_bytes(),
         }
     }
 

@@ -4,6 +4,7 @@
 pub mod config;
 pub mod engine;
 pub mod geo_cmd;
+pub mod memory;
 pub mod mesh_cmd;
 pub mod offscreen;
 pub mod path;

@@ -45,8 +45,9 @@ impl Offscreen {
         height: u32,
     ) -> anyhow::Result<Self> {
         let ctx = GpuContext::headless()?;
-        let globe = Globe::with_source(&ctx.device, OffscreenTarget::FORMAT, options, source);
+        // The target first: a memory budget counts it in the process's footprint.
         let target = OffscreenTarget::new(&ctx.device, width, height);
+        let globe = Globe::with_source(&ctx.device, OffscreenTarget::FORMAT, options, source)?;
         Ok(Self { ctx, globe, target })
     }
 

@@ -233,7 +233,7 @@ impl State {
             })
             .context("the window surface is not supported by the adapter")?;
         surface.configure(&ctx.device, &config);
-        let globe = Globe::with_source(&ctx.device, format, &options.globe, source);
+        let globe = Globe::with_source(&ctx.device, format, &options.globe, source)?;
         let view = options
             .camera
             .view(&globe, options.fov_deg, config.width, config.height);

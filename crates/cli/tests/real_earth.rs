@@ -154,7 +154,9 @@ fn quantized_mesh_terrain_matches_the_pyramid_it_was_meshed_from() {
     use globus_stream::TileSource;
     use globus_stream::decode::DecodeLimits;
     use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
-    use globus_stream::open::{LayerKind, elevation_pyramid, open_layer};
+    use globus_stream::open::{
+        DEFAULT_LAYER_CACHE_BYTES, LayerKind, elevation_pyramid, open_layer,
+    };
     use std::sync::Arc;
 
     let root = common::scratch("real_earth", "quantized_mesh");
@@ -220,7 +222,8 @@ fn quantized_mesh_terrain_matches_the_pyramid_it_was_meshed_from() {
             None,
         )
         .unwrap_or_else(|e| panic!("{url}: {e}"));
-        let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
+        let pyramid = elevation_pyramid(layer, DecodeLimits::default(), DEFAULT_LAYER_CACHE_BYTES)
+            .expect("pyramid");
         globus_stream::RasterTerrainSource::new(
             vec![pyramid],
             Vec::new(),

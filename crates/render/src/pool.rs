@@ -60,6 +60,19 @@ impl TilePoolOptions {
     }
 }
 
+impl TilePoolOptions {
+    /// GPU bytes of pools of this size: vertex, slot and index buffers and the colour array
+    /// with its mip chains.
+    pub fn gpu_bytes(&self) -> u64 {
+        let colour_layer: u64 = (0..MIP_LEVELS)
+            .map(|m| u64::from((COLOUR_SIZE >> m).pow(2)) * 4)
+            .sum();
+        u64::from(self.vertices) * (VERTEX_BYTES + 4)
+            + u64::from(self.indices) * 4
+            + colour_layer * u64::from(self.slots)
+    }
+}
+
 impl Default for TilePoolOptions {
     fn default() -> Self {
         Self::with_slots(1024, 0.625)
@@ -377,12 +390,13 @@ impl TilePool {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let colour_bytes: u64 = (0..MIP_LEVELS)
-            .map(|m| u64::from((COLOUR_SIZE >> m).pow(2)) * 4)
-            .sum::<u64>()
-            * u64::from(slots);
-        let gpu_bytes =
-            u64::from(vertices) * (VERTEX_BYTES + 4) + u64::from(indices) * 4 + colour_bytes;
+        let options = TilePoolOptions {
+            slots,
+            vertices,
+            indices,
+            ..options
+        };
+        let gpu_bytes = options.gpu_bytes();
         Self {
             vertex_buffer,
             slot_buffer,
@@ -390,12 +404,7 @@ impl TilePool {
             colour_texture,
             colour_view,
             residency: Residency::new(slots, vertices, indices),
-            options: TilePoolOptions {
-                slots,
-                vertices,
-                indices,
-                ..options
-            },
+            options,
             stats: PoolStats {
                 capacity: slots,
                 vertex_capacity: vertices,

@@ -188,6 +188,11 @@ impl TerrainLayer {
         }
     }
 
+    /// Bytes of loaded tiles (and their colours) in the cache, and its budget.
+    pub fn cache_bytes(&self) -> (usize, usize) {
+        (self.cache.bytes(), self.cache.budget())
+    }
+
     /// The body tiles are on.
     pub fn ellipsoid(&self) -> &Ellipsoid {
         &self.ellipsoid

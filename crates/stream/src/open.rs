@@ -467,13 +467,16 @@ fn parse_scheme(text: Option<&str>, default: TilingScheme) -> Result<TilingSchem
     })
 }
 
-/// Cached decoded tiles per layer.
-const LAYER_CACHE_TILES: usize = 64;
+/// Bytes of decoded source tiles a layer keeps by default (64 tiles of 256 x 256 samples):
+/// engine tiles beside each other, and of other levels or schemes, share source tiles.
+pub const DEFAULT_LAYER_CACHE_BYTES: usize = 16 << 20;
 
-/// An elevation pyramid ready for [`crate::RasterTerrainSource`].
+/// An elevation pyramid ready for [`crate::RasterTerrainSource`], keeping up to
+/// `cache_bytes` of decoded tiles.
 pub fn elevation_pyramid(
     layer: OpenedLayer,
     limits: DecodeLimits,
+    cache_bytes: usize,
 ) -> Result<Arc<RasterPyramid<HeightImage>>, String> {
     let encoding = layer
         .encoding
@@ -487,17 +490,22 @@ pub fn elevation_pyramid(
                 Box::new(|b| decode_quantized_mesh(b, QUANTIZED_MESH_GRID))
             }
         },
-        LAYER_CACHE_TILES,
+        cache_bytes,
     )))
 }
 
-/// An imagery pyramid ready for [`crate::RasterTerrainSource`].
-pub fn imagery_pyramid(layer: OpenedLayer, limits: DecodeLimits) -> Arc<RasterPyramid<Rgba>> {
+/// An imagery pyramid ready for [`crate::RasterTerrainSource`], keeping up to `cache_bytes`
+/// of decoded tiles.
+pub fn imagery_pyramid(
+    layer: OpenedLayer,
+    limits: DecodeLimits,
+    cache_bytes: usize,
+) -> Arc<RasterPyramid<Rgba>> {
     Arc::new(RasterPyramid::new(
         layer.fetch,
         layer.spec,
         Box::new(move |b| decode_image(b, limits)),
-        LAYER_CACHE_TILES,
+        cache_bytes,
     ))
 }
 

@@ -113,12 +113,27 @@ impl Samples for crate::decode::Rgba {
     }
 }
 
-/// Decoded tiles ("no tile", or why the tile is broken) with their last-use stamps, and the
-/// stamp clock.
-type TileCache<T> = (
-    FxHashMap<TileKey, (Result<Option<Arc<T>>, String>, u64)>,
-    u64,
-);
+/// A decoded tile, "no tile", or why the tile is broken.
+type TileEntry<T> = Result<Option<Arc<T>>, String>;
+
+/// Decoded tiles with their last-use stamps.
+struct TileCache<T> {
+    tiles: FxHashMap<TileKey, (TileEntry<T>, u64)>,
+    /// The stamp clock.
+    now: u64,
+    /// Bytes held.
+    bytes: usize,
+}
+
+/// Bytes an entry of a [`TileCache`] is counted at: its samples, or a small record.
+fn entry_bytes<T: Samples>(e: &TileEntry<T>) -> usize {
+    const RECORD: usize = 64;
+    match e {
+        Ok(Some(t)) => t.byte_size() + RECORD,
+        Ok(None) => RECORD,
+        Err(m) => m.len() + RECORD,
+    }
+}
 
 type Decoder<T> = dyn Fn(&[u8]) -> Result<T, String> + Send + Sync;
 
@@ -128,26 +143,35 @@ pub struct RasterPyramid<T: Samples> {
     spec: PyramidSpec,
     decode: Box<Decoder<T>>,
     cache: Mutex<TileCache<T>>,
-    cache_tiles: usize,
+    cache_bytes: usize,
 }
 
 impl<T: Samples> RasterPyramid<T> {
-    /// A pyramid read through `fetch`, decoded by `decode`, keeping up to `cache_tiles`
-    /// decoded tiles (neighbouring engine tiles share source tiles when schemes or levels
+    /// A pyramid read through `fetch`, decoded by `decode`, keeping decoded tiles up to
+    /// `cache_bytes` (neighbouring engine tiles share source tiles when schemes or levels
     /// differ).
     pub fn new(
         fetch: Arc<dyn Fetch>,
         spec: PyramidSpec,
         decode: Box<Decoder<T>>,
-        cache_tiles: usize,
+        cache_bytes: usize,
     ) -> Self {
         Self {
             fetch,
             spec,
             decode,
-            cache: Mutex::new((FxHashMap::default(), 0)),
-            cache_tiles: cache_tiles.max(4),
+            cache: Mutex::new(TileCache {
+                tiles: FxHashMap::default(),
+                now: 0,
+                bytes: 0,
+            }),
+            cache_bytes,
         }
+    }
+
+    /// Bytes of decoded tiles held.
+    pub fn cached_bytes(&self) -> usize {
+        self.cache.lock().unwrap_or_else(|p| p.into_inner()).bytes
     }
 
     /// The layout.
@@ -166,9 +190,9 @@ impl<T: Samples> RasterPyramid<T> {
     pub fn tile(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
         {
             let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
-            c.1 += 1;
-            let now = c.1;
-            if let Some(e) = c.0.get_mut(&key) {
+            c.now += 1;
+            let now = c.now;
+            if let Some(e) = c.tiles.get_mut(&key) {
                 e.1 = now;
                 return e.0.clone().map_err(FetchError::Permanent);
             }
@@ -181,17 +205,28 @@ impl<T: Samples> RasterPyramid<T> {
             Err(FetchError::Permanent(m)) => Err(m),
             Err(e) => return Err(e),
         };
+        let bytes = entry_bytes(&entry);
         let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
-        c.1 += 1;
-        let now = c.1;
-        if c.0.len() >= self.cache_tiles {
-            // Drop the older half.
-            let mut stamps: Vec<u64> = c.0.values().map(|e| e.1).collect();
+        c.now += 1;
+        let now = c.now;
+        if c.bytes + bytes > self.cache_bytes {
+            // Drop the least recently used until the new tile fits (all of them if it alone
+            // is over the budget: it is still returned, and kept until the next one comes).
+            let mut stamps: Vec<(u64, TileKey)> = c.tiles.iter().map(|(k, e)| (e.1, *k)).collect();
             stamps.sort_unstable();
-            let cut = stamps[stamps.len() / 2];
-            c.0.retain(|_, e| e.1 > cut);
+            for (_, k) in stamps {
+                if c.bytes + bytes <= self.cache_bytes {
+                    break;
+                }
+                if let Some(e) = c.tiles.remove(&k) {
+                    c.bytes -= entry_bytes(&e.0);
+                }
+            }
         }
-        c.0.insert(key, (entry.clone(), now));
+        if let Some(old) = c.tiles.insert(key, (entry.clone(), now)) {
+            c.bytes -= entry_bytes(&old.0);
+        }
+        c.bytes += bytes;
         entry.map_err(FetchError::Permanent)
     }
 
@@ -258,6 +293,66 @@ mod tests {
         assert_eq!(g.level_for_spacing(spacing), 3);
         assert_eq!(g.level_for_spacing(spacing * 0.99), 4);
         assert_eq!(g.level_for_spacing(1e-12), 12);
+    }
+
+    /// Tiles whose bytes are their key's level, counting fetches.
+    struct Counting(std::sync::atomic::AtomicUsize);
+
+    impl Fetch for Counting {
+        fn name(&self) -> &str {
+            "counting"
+        }
+        fn fetch(
+            &self,
+            key: TileKey,
+            _: &Cancel,
+        ) -> Result<Option<crate::fetch::Fetched>, FetchError> {
+            self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Ok(Some(crate::fetch::Fetched::local(vec![key.level()])))
+        }
+    }
+
+    #[test]
+    fn decoded_tiles_stay_within_their_byte_budget() {
+        let fetch = Arc::new(Counting(Default::default()));
+        let tile_bytes = 256 * 256 * 4;
+        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
+            Ok(crate::decode::Rgba {
+                width: 256,
+                height: 256,
+                pixels: vec![0; 256 * 256 * 4],
+            })
+        });
+        // Room for five tiles and their records, not six.
+        let budget = 5 * tile_bytes + 5 * 64 + 100;
+        let p = RasterPyramid::new(
+            fetch.clone(),
+            spec(TilingScheme::WebMercator, SampleGrid::Cells),
+            decode,
+            budget,
+        );
+        let cancel = Cancel::new();
+        let keys: Vec<TileKey> = (0..40).map(|x| TileKey::new(6, x, 7)).collect();
+        for k in &keys {
+            p.tile(*k, &cancel).expect("tile");
+            assert!(
+                p.cached_bytes() <= budget,
+                "{} > {budget}",
+                p.cached_bytes()
+            );
+        }
+        assert_eq!(p.cached_bytes(), 5 * (tile_bytes + 64));
+        // The five most recent are kept (no fetch), the first one was dropped (fetched again).
+        let before = fetch.0.load(std::sync::atomic::Ordering::Relaxed);
+        for k in &keys[35..] {
+            p.tile(*k, &cancel).expect("tile");
+        }
+        assert_eq!(fetch.0.load(std::sync::atomic::Ordering::Relaxed), before);
+        p.tile(keys[0], &cancel).expect("tile");
+        assert_eq!(
+            fetch.0.load(std::sync::atomic::Ordering::Relaxed),
+            before + 1
+        );
     }
 
     #[test]

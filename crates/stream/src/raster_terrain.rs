@@ -243,7 +243,7 @@ impl RasterTerrainSource {
         }
         // Without elevation layers (imagery on the bare ellipsoid) imagery decides how deep
         // tiles go; with them, elevation does, and deeper imagery reaches refined tiles
-        // through `imagery_colour`.
+        // through `has_imagery_for` and `load_colour`.
         if self.elevation.is_empty() {
             detailed = self.imagery_detailed(rect);
         }
@@ -580,20 +580,8 @@ impl TileSource for RasterTerrainSource {
 }
 
 impl TerrainSource for RasterTerrainSource {
-    fn imagery_colour(
-        &self,
-        key: TileKey,
-        cancel: &Cancel,
-    ) -> Result<Option<ColourImage>, SourceError> {
-        let rect = TilingScheme::Geographic.rect(key);
-        if self.imagery.is_empty() || !self.imagery_detailed(&rect) {
-            return Ok(None);
-        }
-        // Heights only tint where no imagery covers; imagery covers here.
-        let flat = vec![0f32; HEIGHT_GRID_SIDE * HEIGHT_GRID_SIDE];
-        self.colour(&rect, &flat, cancel)
-            .map(Some)
-            .map_err(|e| self.fail(key, e))
+    fn has_imagery_for(&self, key: TileKey) -> bool {
+        !self.imagery.is_empty() && self.imagery_detailed(&TilingScheme::Geographic.rect(key))
     }
 
     fn load_colour(
@@ -621,5 +609,11 @@ impl TerrainSource for RasterTerrainSource {
 
     fn max_level(&self) -> u8 {
         self.max_level
+    }
+
+    fn cached_bytes(&self) -> usize {
+        let elevation: usize = self.elevation.iter().map(|p| p.cached_bytes()).sum();
+        let imagery: usize = self.imagery.iter().map(|p| p.cached_bytes()).sum();
+        elevation + imagery
     }
 }

@@ -11,8 +11,9 @@ use crate::cache::LruCache;
 use crate::fetch::Cancel;
 use crate::{SourceError, TerrainData, TerrainSource, TileSource};
 
-/// Base tiles kept for refinement (a view needs a handful of bases at a time).
-const BASE_CACHE_BYTES: usize = 32 << 20;
+/// Bytes of base tiles kept for refinement by default (a view needs a handful of bases at a
+/// time).
+pub const DEFAULT_BASE_CACHE_BYTES: usize = 32 << 20;
 
 /// Wraps a geographic terrain source whose data ends at its `max_level`: deeper tiles are
 /// invented from the deepest tile the source has above them ([`Refiner`]), down to
@@ -48,8 +49,16 @@ impl RefinedSource {
             data_level,
             max_level: max_level.max(data_level),
             mesh_options,
-            bases: Mutex::new((LruCache::new(BASE_CACHE_BYTES), 0)),
+            bases: Mutex::new((LruCache::new(DEFAULT_BASE_CACHE_BYTES), 0)),
             name,
+        }
+    }
+
+    /// The same, keeping up to `bytes` of base tiles.
+    pub fn with_base_cache_bytes(self, bytes: usize) -> Self {
+        Self {
+            bases: Mutex::new((LruCache::new(bytes), 0)),
+            ..self
         }
     }
 
@@ -157,12 +166,22 @@ impl TileSource for RefinedSource {
                 source_name: self.name.clone(),
                 message: e.to_string(),
             })?;
-        // Real imagery deeper than the terrain's data replaces the refined colour.
-        if let Some(colour) = self.inner.imagery_colour(key, cancel)? {
-            tile.colour = colour;
+        // Real imagery deeper than the terrain's data replaces the refined colour: a load of
+        // its own (`load_colour`), so the refined geometry is drawn before it arrives. Its
+        // mean colour stands in (never drawn: the nearest ancestor's colour is shown).
+        let colour_separate = self.inner.has_imagery_for(key);
+        if colour_separate {
+            let mean = tile
+                .colour
+                .mips
+                .last()
+                .cloned()
+                .unwrap_or_else(|| vec![0; 4]);
+            tile.colour = globus_terrain::ColourImage::with_mips(1, mean);
         }
         Ok(Some(TerrainData {
             generated: true,
+            colour_separate,
             ..TerrainData::build(
                 tile,
                 self.inner.ellipsoid(),
@@ -183,12 +202,12 @@ impl TerrainSource for RefinedSource {
         data: &TerrainData,
         cancel: &Cancel,
     ) -> Result<Option<globus_terrain::ColourImage>, SourceError> {
-        // Refined tiles come with their colour; the inner source's tiles may not.
-        if data.tile.key.level() <= self.data_level {
-            self.inner.load_colour(data, cancel)
-        } else {
-            Ok(None)
-        }
+        // The inner source's imagery, over the tile's heights (refined or its own).
+        self.inner.load_colour(data, cancel)
+    }
+
+    fn has_imagery_for(&self, key: TileKey) -> bool {
+        self.inner.has_imagery_for(key)
     }
 
     fn ellipsoid(&self) -> &Ellipsoid {
@@ -208,6 +227,11 @@ impl TerrainSource for RefinedSource {
 
     fn max_level(&self) -> u8 {
         self.max_level
+    }
+
+    fn cached_bytes(&self) -> usize {
+        let bases = self.bases.lock().map_or(0, |g| g.0.bytes());
+        bases + self.inner.cached_bytes()
     }
 
     fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {

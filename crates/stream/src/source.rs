@@ -67,6 +67,11 @@ pub trait TerrainSource: TileSource<Tile = TerrainData> {
     fn height_range_m(&self) -> (f64, f64);
     /// The deepest level with data.
     fn max_level(&self) -> u8;
+    /// Bytes the source keeps in caches of its own (decoded source tiles, refinement bases),
+    /// besides the tiles it hands out: counted against the engine's memory budget.
+    fn cached_bytes(&self) -> usize {
+        0
+    }
     /// The full-resolution surface height at a longitude and latitude (radians), metres, if
     /// the source can answer without loading tiles (a procedural source can; an archive
     /// cannot, and the engine then reads its loaded tiles).
@@ -74,19 +79,17 @@ pub trait TerrainSource: TileSource<Tile = TerrainData> {
         let _ = (lon_rad, lat_rad);
         None
     }
-    /// Real colour for a tile the source has no terrain data for but imagery deeper than its
-    /// terrain (so refinement below the terrain's data keeps real imagery); `None` where it
-    /// has none.
-    fn imagery_colour(
-        &self,
-        key: TileKey,
-        cancel: &Cancel,
-    ) -> Result<Option<globus_terrain::ColourImage>, SourceError> {
-        let _ = (key, cancel);
-        Ok(None)
+    /// Whether the source has imagery with detail for `key`, a tile it may have no terrain
+    /// data for (imagery deeper than its terrain): a wrapper that invents such a tile marks
+    /// it [`TerrainData::colour_separate`] and gets its real colour from
+    /// [`TerrainSource::load_colour`]. Cheap: no loads.
+    fn has_imagery_for(&self, key: TileKey) -> bool {
+        let _ = key;
+        false
     }
-    /// The colour of a tile loaded with [`TerrainData::colour_separate`] set: the source's
-    /// imagery for it (fetched and composited now, on a worker thread of its own scheduler, so
+    /// The colour of a tile loaded with [`TerrainData::colour_separate`] set (by this source,
+    /// or by a wrapper for a tile it invented where [`TerrainSource::has_imagery_for`]): the
+    /// source's imagery for it, over its heights' tint, (fetched and composited now, on a worker thread of its own scheduler, so
     /// a tile's geometry is drawn before its imagery arrives). `None`: the source has no
     /// colour of its own for this tile, and the nearest ancestor's stays.
     fn load_colour(

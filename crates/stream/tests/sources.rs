@@ -9,7 +9,10 @@ use std::time::{Duration, Instant};
 use globus_geo::Ellipsoid;
 use globus_stream::decode::DecodeLimits;
 use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
-use globus_stream::open::{ElevationFormat, LayerKind, SourceSpec, elevation_pyramid, open_layer};
+use globus_stream::open::{
+    DEFAULT_LAYER_CACHE_BYTES, ElevationFormat, LayerKind, SourceSpec, elevation_pyramid,
+    open_layer,
+};
 use globus_stream::pyramid::SampleGrid;
 use globus_stream::{
     Outcome, RasterTerrainSource, RetryPolicy, Scheduler, SchedulerOptions, SystemClock,
@@ -218,7 +221,8 @@ fn every_fault_ends_as_a_counted_tile_failure_and_the_rest_completes() {
         None,
     )
     .expect("served directory");
-    let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
+    let pyramid = elevation_pyramid(layer, DecodeLimits::default(), DEFAULT_LAYER_CACHE_BYTES)
+        .expect("pyramid");
     let source = Arc::new(
         RasterTerrainSource::new(
             vec![pyramid],
@@ -368,7 +372,8 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
         None,
     )
     .expect("dir");
-    let pyramid = elevation_pyramid(layer, DecodeLimits::default()).expect("pyramid");
+    let pyramid = elevation_pyramid(layer, DecodeLimits::default(), DEFAULT_LAYER_CACHE_BYTES)
+        .expect("pyramid");
     let source = RasterTerrainSource::new(
         vec![pyramid],
         Vec::new(),
@@ -613,9 +618,17 @@ fn dem_and_imagery(server: &FaultServer, http: HttpOptions) -> RasterTerrainSour
         )
         .expect("layer")
     };
-    let dem = elevation_pyramid(open("/dem", LayerKind::Elevation), DecodeLimits::default())
-        .expect("dem");
-    let img = imagery_pyramid(open("/img", LayerKind::Imagery), DecodeLimits::default());
+    let dem = elevation_pyramid(
+        open("/dem", LayerKind::Elevation),
+        DecodeLimits::default(),
+        DEFAULT_LAYER_CACHE_BYTES,
+    )
+    .expect("dem");
+    let img = imagery_pyramid(
+        open("/img", LayerKind::Imagery),
+        DecodeLimits::default(),
+        DEFAULT_LAYER_CACHE_BYTES,
+    );
     RasterTerrainSource::new(
         vec![dem],
         vec![img],
@@ -705,6 +718,7 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
         MeshOptions::default(),
     );
     let cancel = Cancel::new();
+    let imagery_requests = |level: u8| server.count(&format!("/img/{level}/"));
     // 64-pixel imagery at level 8 matches 128-texel engine tiles at level 7: the north-west
     // quadrant of engine tile 7/x/y shows imagery tile 8/2x/2y, real colour, two levels
     // below the terrain's data.
@@ -715,16 +729,35 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
         // Broken: the same, and it was asked for once only.
         (c, c),
     ] {
+        // The refined geometry comes without waiting for the deeper imagery: that is a
+        // load of its own.
+        let before = imagery_requests(8);
         let t = refined.load(key, &cancel).expect("load").expect("tile");
         assert!(t.generated, "{key} is refined below the data");
+        assert!(t.colour_separate, "{key}: its imagery loads on its own");
+        assert_eq!(
+            imagery_requests(8),
+            before,
+            "{key}: the geometry waited for level-8 imagery"
+        );
+        let colour = refined
+            .load_colour(&t, &cancel)
+            .expect("colour")
+            .expect("imagery here");
         let want = key_colour(want_from);
         assert_eq!(
-            quadrant_texel(&t.tile.colour),
+            quadrant_texel(&colour),
             [want[0], want[1], want[2]],
             "{key}"
         );
     }
     let _ = refined.load(c, &cancel).expect("again");
+    // Outside the imagery's region the refined colour comes with the tile.
+    let outside = refined
+        .load(engine(30.0, 40.0), &cancel)
+        .expect("load")
+        .expect("tile");
+    assert!(!outside.colour_separate && outside.tile.colour.size > 1);
     assert_eq!(
         server.count(&format!("/img/8/{}/{}.png", broken.x(), broken.y())),
         1
@@ -765,7 +798,11 @@ fn web_mercator_imagery_leaves_no_hole_or_smear_at_the_poles() {
     .expect("layer");
     let source = RasterTerrainSource::new(
         Vec::new(),
-        vec![imagery_pyramid(layer, DecodeLimits::default())],
+        vec![imagery_pyramid(
+            layer,
+            DecodeLimits::default(),
+            DEFAULT_LAYER_CACHE_BYTES,
+        )],
         Ellipsoid::WGS84,
         (0.0, 0.0),
         MeshOptions::default(),
