@@ -29,7 +29,7 @@ use crate::decode::{
     DecodeLimits, HeightImage, QUANTIZED_MESH_GRID, Rgba, decode_elevation, decode_image,
     decode_quantized_mesh,
 };
-use crate::fetch::pmtiles::{FileRange, HttpRange};
+use crate::fetch::pmtiles::{FileRange, HttpRange, KeptHead};
 use crate::fetch::{
     CachedFetch, Cancel, DirectoryFetch, DiskCacheOptions, Fetch, FetchError, HttpClient,
     MbTilesFetch, PmTilesFetch, TemplateFetch, WmsFetch, WmsVersion,
@@ -214,7 +214,8 @@ pub fn open_layer(
     client: &Arc<HttpClient>,
     disk_cache: Option<&DiskCacheOptions>,
 ) -> Result<OpenedLayer, String> {
-    // Tile services go through the disk cache, if there is one; files need none.
+    // Tile services (and archives over HTTP) go through the disk cache, if there is one;
+    // files need none.
     let cached = |f: Box<dyn Fetch>| -> Result<Arc<dyn Fetch>, String> {
         Ok(match disk_cache {
             Some(o) => Arc::new(CachedFetch::new(f, o.clone())?),
@@ -254,15 +255,30 @@ pub fn open_layer(
         )?;
         (cached(Box::new(w))?, Meta::default())
     } else if url.ends_with(".pmtiles") {
-        let (fetch, json): (Arc<dyn Fetch>, serde_json::Value) = if is_http {
-            let p = PmTilesFetch::open(HttpRange::new(Arc::clone(client), url))?;
-            let j = pm_meta(&p);
-            (Arc::new(p), j)
-        } else {
-            let p = PmTilesFetch::open(FileRange::open(Path::new(url))?)?;
-            let j = pm_meta(&p);
-            (Arc::new(p), j)
-        };
+        let (fetch, json): (Arc<dyn Fetch>, serde_json::Value) =
+            if let (true, Some(o)) = (is_http, disk_cache) {
+                // Opened offline from the kept head; tiles from the disk cache, dropped when
+                // the archive changed.
+                let p = PmTilesFetch::open(KeptHead::new(
+                    HttpRange::new(Arc::clone(client), url),
+                    &o.dir,
+                ))?;
+                let changed = p.reader().opened();
+                let j = pm_meta(&p);
+                let c = CachedFetch::new(Box::new(p), o.clone())?;
+                if changed {
+                    c.clear();
+                }
+                (Arc::new(c), j)
+            } else if is_http {
+                let p = PmTilesFetch::open(HttpRange::new(Arc::clone(client), url))?;
+                let j = pm_meta(&p);
+                (Arc::new(p), j)
+            } else {
+                let p = PmTilesFetch::open(FileRange::open(Path::new(url))?)?;
+                let j = pm_meta(&p);
+                (Arc::new(p), j)
+            };
         (fetch, meta_from_json(&json))
     } else if url.ends_with(".mbtiles") {
         if is_http {

@@ -542,6 +542,126 @@ fn the_disk_cache_serves_a_second_session_with_the_server_down() {
     let _ = std::fs::remove_dir_all(&base);
 }
 
+#[test]
+fn a_pmtiles_archive_over_http_opens_offline_from_the_disk_cache_and_is_dropped_when_it_changes() {
+    use globus_stream::fetch::{DiskCacheOptions, FetchError};
+    let base = scratch("pm-diskcache");
+    let dir = base.join("dem");
+    tile_srtm(&dir);
+    tile_srtm(&base.join("dem.pmtiles"));
+    let keys = keys_in(&dir);
+    let want = |k: TileKey| {
+        std::fs::read(dir.join(format!("{}/{}/{}.png", k.level(), k.x(), k.y()))).expect("tile")
+    };
+    let options = DiskCacheOptions {
+        dir: base.join("cache"),
+        max_bytes: 1 << 30,
+        default_fresh_for: Duration::from_secs(86_400),
+    };
+    let http = client(HttpOptions {
+        connect_timeout: Duration::from_millis(500),
+        ..HttpOptions::default()
+    });
+    let server = FaultServer::serve_dir(&base);
+    let spec = SourceSpec::parse(&server.url("/dem.pmtiles")).expect("spec");
+    let open = || open_layer(&spec, LayerKind::Elevation, &http, Some(&options));
+    let cancel = Cancel::new();
+
+    // First session: every tile but the last by a range request, kept on disk.
+    let (last, kept) = keys.split_last().expect("keys");
+    let first = open().expect("open online");
+    for &k in kept {
+        let got = first.fetch.fetch(k, &cancel).expect("fetch");
+        assert_eq!(got.map(|f| f.bytes), Some(want(k)), "{k}");
+    }
+    // Second session online: opening reads the archive's head again (to see whether it
+    // changed), the tiles come from disk without one range request.
+    let second = open().expect("open again");
+    let opened = server.count("/dem.pmtiles");
+    for &k in kept {
+        let got = second.fetch.fetch(k, &cancel).expect("fetch");
+        assert_eq!(got.map(|f| f.bytes), Some(want(k)), "{k}");
+    }
+    assert_eq!(
+        server.count("/dem.pmtiles"),
+        opened,
+        "tiles served from disk"
+    );
+
+    // The archive replaced (Mapbox encoding now) under the same URL: the tiles kept from
+    // the old one are dropped and the new archive's are served.
+    let changed = base.join("changed.pmtiles");
+    let job = TileJob {
+        max_level: Some(MAX_LEVEL),
+        threads: Some(2),
+        ..TileJob::new(
+            JobKind::Dem {
+                encoding: ElevationEncoding::Mapbox,
+                height_scale: None,
+            },
+            vec![shared_data("N57E011.hgt")],
+            changed.clone(),
+        )
+    };
+    globus_tiler::run(&job).expect("tiling the new archive");
+    let local = open_layer(
+        &SourceSpec::parse(&changed.display().to_string()).expect("spec"),
+        LayerKind::Elevation,
+        &http,
+        None,
+    )
+    .expect("the new archive on disk");
+    let new_tile = |k: TileKey| {
+        local
+            .fetch
+            .fetch(k, &cancel)
+            .expect("local")
+            .map(|f| f.bytes)
+    };
+    assert!(
+        new_tile(kept[0]) != Some(want(kept[0])),
+        "the archives differ"
+    );
+    std::fs::rename(&changed, base.join("dem.pmtiles")).expect("replace");
+    let renewed = open().expect("open the new archive");
+    assert_eq!(
+        renewed.encoding,
+        Some(ElevationFormat::Rgb(ElevationEncoding::Mapbox))
+    );
+    for &k in kept {
+        let got = renewed.fetch.fetch(k, &cancel).expect("fetch");
+        assert!(
+            got.map(|f| f.bytes) == new_tile(k),
+            "{k}: not the new archive's tile"
+        );
+    }
+
+    // The server gone: the archive opens from the kept head, same layout, every tile
+    // fetched before is there.
+    drop(server);
+    let offline = open().expect("the archive opens offline");
+    assert_eq!(offline.spec, renewed.spec);
+    assert_eq!(offline.encoding, renewed.encoding);
+    for &k in kept {
+        let got = offline.fetch.fetch(k, &cancel).expect("served from disk");
+        assert!(
+            got.map(|f| f.bytes) == new_tile(k),
+            "{k}: not the new archive's tile"
+        );
+    }
+    // A tile of the archive never fetched is a transient failure offline (asked again
+    // later); one the kept directory says is not in the archive is "no data".
+    assert!(matches!(
+        offline.fetch.fetch(*last, &cancel),
+        Err(FetchError::Transient { .. })
+    ));
+    assert_eq!(
+        offline.fetch.fetch(TileKey::new(7, 0, 0), &cancel),
+        Ok(None)
+    );
+    let _ = std::fs::remove_dir_all(&base);
+}
+
 fn walk_bytes(dir: &Path) -> u64 {
     let mut total = 0;
     for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {

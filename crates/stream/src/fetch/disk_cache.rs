@@ -114,6 +114,17 @@ impl CachedFetch {
         })
     }
 
+    /// Forgets every tile kept for this origin (its data changed under the same name).
+    pub fn clear(&self) {
+        let held = folder_bytes(&self.root);
+        let _ = std::fs::remove_dir_all(&self.root);
+        let _ = std::fs::create_dir_all(&self.root);
+        let _ = std::fs::write(self.root.join("ORIGIN"), self.inner.name());
+        let total = self.bytes.load(Ordering::Relaxed);
+        self.bytes
+            .store(total.saturating_sub(held), Ordering::Relaxed);
+    }
+
     /// Counters.
     pub fn stats(&self) -> DiskCacheStats {
         *self.stats.lock().unwrap_or_else(|p| p.into_inner())

@@ -25,7 +25,7 @@ pub use dir::DirectoryFetch;
 pub use disk_cache::{CachedFetch, DiskCacheOptions, DiskCacheStats};
 pub use http::{HttpClient, HttpOptions, TemplateFetch};
 pub use mbtiles::MbTilesFetch;
-pub use pmtiles::{PmTilesFetch, RangeRead};
+pub use pmtiles::{KeptHead, PmTilesFetch, RangeRead};
 pub use template::UrlTemplate;
 pub use wms::{WmsFetch, WmsVersion};
 

@@ -7,11 +7,16 @@
 //!
 //! Everything read is untrusted: lengths are capped, decompression is bounded, leaf
 //! directories nest at most four deep.
+//!
+//! With a disk cache, an archive over HTTP is read through [`KeptHead`] (what opening reads
+//! is kept on disk, so the archive opens offline) and its tiles through
+//! [`super::CachedFetch`]; a changed archive (its header differs from the kept one) drops
+//! the tiles cached from the old one.
 
 use std::fs::File;
 use std::io::Read;
 use std::os::unix::fs::FileExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use globus_tiling::pmtiles::{
@@ -128,6 +133,120 @@ impl RangeRead for HttpRange {
     }
 }
 
+/// What one opening read: (offset, bytes) of each range.
+type Parts = Vec<(u64, Vec<u8>)>;
+
+const KEPT_MAGIC: &[u8; 8] = b"GLBSPMH1";
+
+/// A [`RangeRead`] that keeps on disk the ranges read while an archive is opened (header,
+/// root directory, metadata) and serves them when the origin cannot be reached, so an archive
+/// over HTTP opens offline. Reads after [`KeptHead::opened`] pass straight through.
+pub struct KeptHead<R: RangeRead> {
+    inner: R,
+    path: PathBuf,
+    kept: Parts,
+    recording: Mutex<Option<Parts>>,
+}
+
+impl<R: RangeRead> KeptHead<R> {
+    /// `inner`, keeping its opening reads in the folder `dir` (a file named by a hash of
+    /// the archive's name).
+    pub fn new(inner: R, dir: &Path) -> Self {
+        let path = dir.join(format!(
+            "{:016x}.pmtiles-head",
+            super::disk_cache::origin_hash(inner.name())
+        ));
+        let kept = std::fs::read(&path)
+            .ok()
+            .and_then(|b| parse_parts(&b))
+            .unwrap_or_default();
+        Self {
+            inner,
+            path,
+            kept,
+            recording: Mutex::new(Some(Vec::new())),
+        }
+    }
+
+    /// Ends the opening: keeps what it read (if it read the origin) and tells whether the
+    /// archive differs from the one kept before (then tiles cached from that one are wrong).
+    pub fn opened(&self) -> bool {
+        let read = self
+            .recording
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take()
+            .unwrap_or_default();
+        let head = |parts: &Parts| parts.iter().find(|p| p.0 == 0).map(|p| p.1.clone());
+        let changed = matches!((head(&self.kept), head(&read)), (Some(a), Some(b)) if a != b);
+        if read != self.kept && !read.is_empty() {
+            let mut out = KEPT_MAGIC.to_vec();
+            for (offset, bytes) in &read {
+                out.extend_from_slice(&offset.to_le_bytes());
+                out.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+                out.extend_from_slice(bytes);
+            }
+            if let Some(dir) = self.path.parent() {
+                let _ = std::fs::create_dir_all(dir);
+            }
+            let tmp = self
+                .path
+                .with_extension(format!("tmp{}", std::process::id()));
+            if std::fs::write(&tmp, &out).is_err() || std::fs::rename(&tmp, &self.path).is_err() {
+                let _ = std::fs::remove_file(&tmp);
+            }
+        }
+        changed
+    }
+}
+
+/// The parts of a kept file, `None` if it is not one (torn, foreign).
+fn parse_parts(b: &[u8]) -> Option<Parts> {
+    let mut rest = b.strip_prefix(KEPT_MAGIC)?;
+    let mut parts = Vec::new();
+    let word = |r: &[u8]| -> Option<u64> { Some(u64::from_le_bytes(r.get(..8)?.try_into().ok()?)) };
+    while !rest.is_empty() {
+        let offset = word(rest)?;
+        let len = usize::try_from(word(rest.get(8..)?)?).ok()?;
+        let bytes = rest.get(16..16usize.checked_add(len)?)?;
+        parts.push((offset, bytes.to_vec()));
+        rest = &rest[16 + len..];
+    }
+    Some(parts)
+}
+
+impl<R: RangeRead> RangeRead for KeptHead<R> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn read_range(&self, offset: u64, len: u64, cancel: &Cancel) -> Result<Vec<u8>, FetchError> {
+        let mut recording = self.recording.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(read) = recording.as_mut() else {
+            drop(recording);
+            return self.inner.read_range(offset, len, cancel);
+        };
+        let bytes = match self.inner.read_range(offset, len, cancel) {
+            Ok(b) => b,
+            Err(FetchError::Transient {
+                message,
+                retry_after,
+            }) => self
+                .kept
+                .iter()
+                .find(|p| p.0 == offset && p.1.len() as u64 == len)
+                .map(|p| p.1.clone())
+                .ok_or(FetchError::Transient {
+                    message: format!("{message} (and no copy kept on disk)"),
+                    retry_after,
+                })?,
+            Err(e) => return Err(e),
+        };
+        read.push((offset, bytes.clone()));
+        Ok(bytes)
+    }
+}
+
 /// Reads tiles from a PMTiles v3 archive.
 pub struct PmTilesFetch<R: RangeRead> {
     reader: R,
@@ -205,6 +324,11 @@ impl<R: RangeRead> PmTilesFetch<R> {
             scheme,
             leaves: Mutex::new(FxHashMap::default()),
         })
+    }
+
+    /// What the archive is read through.
+    pub fn reader(&self) -> &R {
+        &self.reader
     }
 
     /// The header.
