@@ -6,7 +6,11 @@
 #      each with every frame rasterised (lavapipe shares the cores with the loaders) and with
 #      only the first frame rasterised (the data side alone);
 #   2. alps-dive in real time: the share of loaded tiles never drawn, and tiles loaded again
-#      while cached, for the real-data layers and for the procedural planet.
+#      while cached, for the real-data layers and for the procedural planet;
+#   3. imagery far deeper than the terrain: the world topography (engine level 5) draped with
+#      a shaded relief of N57E011 (tools/hillshade.py, engine level 12); a jump of 5,360 km
+#      from Dakar to 2.5 km above the Swedish coast, time to every wanted tile's geometry and
+#      to its imagery, three runs with only the first frame rasterised.
 # Usage: tools/stream-figures.sh [OUT_DIR] [PORT]
 # On a machine that cannot build (a lent GPU machine), set GLOBUS to a built binary and TILES
 # to the output of tools/tile-demo-data.sh made elsewhere.
@@ -18,6 +22,11 @@ mkdir -p "$out"
 tiles=${TILES:-"$out/tiles"}
 [ -n "${TILES:-}" ] || "$here/tools/tile-demo-data.sh" "$tiles"
 globus=${GLOBUS:-"$here/target/release/globus"}
+if [ ! -d "$tiles/relief" ]; then
+    python3 "$here/tools/hillshade.py" "$here/../shared/data/N57E011.hgt" "$out/relief.png" 2
+    "$globus" tile imagery --in "$out/relief.png" --bounds 11,57,12,58 --scheme geographic \
+        --format jpeg --force --out "$tiles/relief" >/dev/null
+fi
 cd "$here"
 python3 "$here/tools/slow_http.py" "$tiles" "$port" 50 2>"$out/server.log" &
 server=$!
@@ -37,6 +46,12 @@ done
     --path paths/alps-dive.json --size 960x540 --fps 10 --realtime >"$out/alps-real.json"
 "$globus" bench --path paths/alps-dive.json --size 960x540 --fps 10 --realtime \
     >"$out/alps-procedural.json"
+deep="--from -17.4,14.7,3000,90,-20 --to 11.7,57.4,2500,60,-25 --size 1920x1080 --no-draw"
+: >"$out/deep.jsonl"
+for run in 1 2 3; do
+    "$globus" bench --terrain "$base/topo" --imagery "$base/bmng" --imagery "$base/relief" \
+        $deep >>"$out/deep.jsonl"
+done
 python3 - "$out" <<'EOF'
 import json, statistics, sys
 out = sys.argv[1]
@@ -57,4 +72,9 @@ for name in ("alps-real", "alps-procedural"):
           f"stopped in flight {d['loads_stopped_in_flight']}, "
           f"requests deferred while moving {d['requests_deferred_while_moving']}, "
           f"frames with every wanted tile drawn {100 * d['complete_frames_fraction']:.1f} %")
+runs = [json.loads(l) for l in open(f"{out}/deep.jsonl")]
+print(f"imagery deeper than terrain, jump {runs[0]['jump_km']:.0f} km: every wanted tile's geometry "
+      f"{statistics.median(r['geometry_loaded_ms'] for r in runs):.0f} ms, with its imagery "
+      f"{statistics.median(r['all_loaded_ms'] for r in runs):.0f} ms (medians of {len(runs)}), "
+      f"{runs[0]['tiles_loaded']} tiles, {runs[0]['imagery_loaded']} imagery loads")
 EOF

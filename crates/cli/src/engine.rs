@@ -161,25 +161,28 @@ const REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
 /// and refined below), or real elevation and imagery layers refined below their data.
 pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainSource>> {
     let budgets = options.source_budgets();
+    // Data continued below its end by procedural refinement.
+    let refined = |data: Arc<dyn TerrainSource>| -> Arc<dyn TerrainSource> {
+        Arc::new(
+            RefinedSource::new(
+                data,
+                RefineOptions::default(),
+                options.max_level,
+                options.mesh,
+            )
+            .with_base_cache_bytes(budgets.refine_bases),
+        )
+    };
     if !options.uses_real_data() {
         return Ok(match options.refine_below {
             None => Arc::new(
                 ProceduralSource::new(options.seed, options.max_level)
                     .with_mesh_options(options.mesh),
             ),
-            Some(level) => {
-                let data = ProceduralSource::new(options.seed, level.min(options.max_level))
-                    .with_mesh_options(options.mesh);
-                Arc::new(
-                    RefinedSource::new(
-                        Arc::new(data),
-                        RefineOptions::default(),
-                        options.max_level,
-                        options.mesh,
-                    )
-                    .with_base_cache_bytes(budgets.refine_bases),
-                )
-            }
+            Some(level) => refined(Arc::new(
+                ProceduralSource::new(options.seed, level.min(options.max_level))
+                    .with_mesh_options(options.mesh),
+            )),
         });
     }
     let client = Arc::new(HttpClient::new(options.http.clone()));
@@ -215,15 +218,7 @@ pub fn terrain_source(options: &GlobeOptions) -> anyhow::Result<Arc<dyn TerrainS
         options.mesh,
     )
     .map_err(anyhow::Error::msg)?;
-    Ok(Arc::new(
-        RefinedSource::new(
-            Arc::new(raster),
-            RefineOptions::default(),
-            options.max_level,
-            options.mesh,
-        )
-        .with_base_cache_bytes(budgets.refine_bases),
-    ))
+    Ok(refined(Arc::new(raster)))
 }
 
 /// What one frame did.
