@@ -215,14 +215,18 @@ impl RasterTerrainSource {
         })
     }
 
-    /// Heights of the 4x oversampled grid (and the mesh grid inside it), or `None` if no
-    /// layer holds data finer than this tile's mesh.
+    /// Heights of the 4x oversampled grid (and the mesh grid inside it), and of the ring of
+    /// mesh samples one mesh cell outside the tile (in [`ring_index`] order; `None` where no
+    /// layer has data there, beyond a pole or past the layers' bounds), or `None` if no layer
+    /// holds data finer than this tile's mesh. The ring is read from the same layers at the
+    /// same levels as the neighbouring tiles read their own samples, so normals at shared
+    /// edges agree.
     fn heights(
         &self,
         key: TileKey,
         rect: &GeoRect,
         cancel: &Cancel,
-    ) -> Result<Option<Vec<f64>>, FetchError> {
+    ) -> Result<Option<SampledHeights>, FetchError> {
         let mesh_spacing = rect.height() / f64::from(MESH_SEGMENTS);
         // Layers that reach this tile, with the level each is read at.
         let mut layers = Vec::new();
@@ -258,31 +262,9 @@ impl RasterTerrainSource {
             for i in 0..side {
                 let inward = |f: f64| f.clamp(EDGE_NUDGE, 1.0 - EDGE_NUDGE);
                 let (lon, lat) = rect.lon_lat_at(inward(i as f64 / n), inward(j as f64 / n));
-                // Top to bottom; a layer fades out towards its bounds (where they are not
-                // the world's edges) so its data meets the layer below without a step.
-                let (mut h, mut remaining) = (0.0, 1.0);
-                for (touched, level) in layers.iter_mut().rev() {
-                    let spec = *touched.pyramid.spec();
-                    let w = feather(&spec.bounds, lon, lat);
-                    if w <= 0.0 {
-                        continue;
-                    }
-                    let Some((k, px, py)) = spec.locate(lon, lat, *level) else {
-                        continue;
-                    };
-                    if let Some(t) = touched.get(k, cancel)? {
-                        let v = bilinear(px, py, t.width, t.height, |x, y| {
-                            f64::from(t.heights_m[(y * t.width + x) as usize])
-                        });
-                        any_data = true;
-                        h += remaining * w * v;
-                        remaining *= 1.0 - w;
-                        if remaining <= 0.0 {
-                            break;
-                        }
-                    }
-                }
-                out.push(h);
+                let h = height_from(&mut layers, lon, lat, cancel)?;
+                any_data |= h.is_some();
+                out.push(h.unwrap_or(0.0));
             }
             if cancel.is_cancelled() {
                 return Err(FetchError::Cancelled);
@@ -293,7 +275,25 @@ impl RasterTerrainSource {
         if !any_data && !self.elevation.is_empty() && key.level() > 0 {
             return Ok(None);
         }
-        Ok(Some(out))
+        let m = f64::from(MESH_SEGMENTS);
+        let mut ring = Vec::with_capacity(RING_LEN);
+        for (i, j) in ring_positions() {
+            let (lon, lat) = rect.lon_lat_at(f64::from(i) / m, f64::from(j) / m);
+            ring.push(if lat.abs() > std::f64::consts::FRAC_PI_2 {
+                None
+            } else {
+                let lon = (lon + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                // A neighbour's source tile that fails leaves the slope extrapolated: the
+                // tile itself is whole.
+                match height_from(&mut layers, lon, lat, cancel) {
+                    Ok(h) => h,
+                    Err(FetchError::Cancelled) => return Err(FetchError::Cancelled),
+                    Err(_) => None,
+                }
+            });
+        }
+        Ok(Some((out, ring)))
     }
 
     fn colour(
@@ -361,13 +361,14 @@ impl RasterTerrainSource {
 
     fn build(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainTile>, FetchError> {
         let rect = TilingScheme::Geographic.rect(key);
-        let Some(fine) = self.heights(key, &rect, cancel)? else {
+        let Some((fine, ring)) = self.heights(key, &rect, cancel)? else {
             return Ok(None);
         };
         let side = (MESH_SEGMENTS * OVERSAMPLE + 1) as usize;
         let o = OVERSAMPLE as usize;
         let fine_at = |i: usize, j: usize| fine[j * side + i];
-        // Mesh samples are every OVERSAMPLE-th fine sample; the ring outside the tile
+        // Mesh samples are every OVERSAMPLE-th fine sample; the ring outside the tile is
+        // read from the layers (as the neighbours read them), and where they have nothing
         // continues the slope of the outermost cell.
         let last = MESH_SEGMENTS as i32;
         let m = |i: i32, j: i32| fine_at(i as usize * o, j as usize * o);
@@ -381,14 +382,18 @@ impl RasterTerrainSource {
         for j in -1..=last + 1 {
             for i in -1..=last + 1 {
                 let ((ci, di), (cj, dj)) = (side_of(i), side_of(j));
-                let base = m(ci, cj);
-                let mut h = base;
-                if di != 0 {
-                    h += base - m(ci + di, cj);
-                }
-                if dj != 0 {
-                    h += base - m(ci, cj + dj);
-                }
+                let read = ring_index(i, j).and_then(|r| ring[r]);
+                let h = read.unwrap_or_else(|| {
+                    let base = m(ci, cj);
+                    let mut h = base;
+                    if di != 0 {
+                        h += base - m(ci + di, cj);
+                    }
+                    if dj != 0 {
+                        h += base - m(ci, cj + dj);
+                    }
+                    h
+                });
                 heights.push(h as f32);
             }
         }
@@ -423,6 +428,70 @@ impl RasterTerrainSource {
             max_height_m: hi,
         }))
     }
+}
+
+/// A tile's oversampled heights and its ring ([`RasterTerrainSource::heights`]).
+type SampledHeights = (Vec<f64>, Vec<Option<f64>>);
+
+/// Samples in the ring one mesh cell outside a tile.
+const RING_LEN: usize = 4 * (MESH_SEGMENTS as usize + 2);
+
+/// Mesh coordinates (`-1..=MESH_SEGMENTS + 1`) of the ring's samples, in [`ring_index`] order.
+fn ring_positions() -> impl Iterator<Item = (i32, i32)> {
+    let last = MESH_SEGMENTS as i32 + 1;
+    (-1..=last)
+        .map(move |i| (i, -1))
+        .chain((-1..=last).map(move |i| (i, last)))
+        .chain((0..last).map(|j| (-1, j)))
+        .chain((0..last).map(move |j| (last, j)))
+}
+
+/// Where mesh coordinates (`i`, `j`) lie in the ring, `None` inside the tile.
+fn ring_index(i: i32, j: i32) -> Option<usize> {
+    let last = MESH_SEGMENTS as i32 + 1;
+    let row = (last + 2) as usize;
+    let at = |v: i32| (v + 1) as usize;
+    match (i, j) {
+        (_, -1) => Some(at(i)),
+        (_, j) if j == last => Some(row + at(i)),
+        (-1, _) => Some(2 * row + j as usize),
+        (i, _) if i == last => Some(2 * row + last as usize + j as usize),
+        _ => None,
+    }
+}
+
+/// The height at a point from elevation layers read at their levels, top layer first (a
+/// layer fades out towards its bounds, where they are not the world's edges, so its data
+/// meets the layer below without a step); `None` if no layer has data there.
+fn height_from(
+    layers: &mut [(Touched<'_, HeightImage>, u8)],
+    lon: f64,
+    lat: f64,
+    cancel: &Cancel,
+) -> Result<Option<f64>, FetchError> {
+    let (mut h, mut remaining, mut any) = (0.0, 1.0, false);
+    for (touched, level) in layers.iter_mut().rev() {
+        let spec = *touched.pyramid.spec();
+        let w = feather(&spec.bounds, lon, lat);
+        if w <= 0.0 {
+            continue;
+        }
+        let Some((k, px, py)) = spec.locate(lon, lat, *level) else {
+            continue;
+        };
+        if let Some(t) = touched.get(k, cancel)? {
+            let v = bilinear(px, py, t.width, t.height, |x, y| {
+                f64::from(t.heights_m[(y * t.width + x) as usize])
+            });
+            any = true;
+            h += remaining * w * v;
+            remaining *= 1.0 - w;
+            if remaining <= 0.0 {
+                break;
+            }
+        }
+    }
+    Ok(any.then_some(h))
 }
 
 /// Latitude (radians) beyond which Web Mercator imagery has nothing.
@@ -615,5 +684,33 @@ impl TerrainSource for RasterTerrainSource {
         let elevation: usize = self.elevation.iter().map(|p| p.cached_bytes()).sum();
         let imagery: usize = self.imagery.iter().map(|p| p.cached_bytes()).sum();
         elevation + imagery
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ring_is_every_sample_around_the_mesh_once() {
+        let positions: Vec<(i32, i32)> = ring_positions().collect();
+        assert_eq!(positions.len(), RING_LEN);
+        let last = MESH_SEGMENTS as i32 + 1;
+        let mut seen = [false; RING_LEN];
+        for j in -1..=last {
+            for i in -1..=last {
+                let outside = i == -1 || j == -1 || i == last || j == last;
+                match ring_index(i, j) {
+                    Some(r) => {
+                        assert!(outside, "({i}, {j}) is inside");
+                        assert_eq!(positions[r], (i, j));
+                        assert!(!seen[r]);
+                        seen[r] = true;
+                    }
+                    None => assert!(!outside, "({i}, {j}) is on the ring"),
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s));
     }
 }

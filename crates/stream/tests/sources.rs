@@ -402,6 +402,38 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
         "{}",
         t.tile.geometric_error_m
     );
+    // The ring of heights one mesh cell outside the tile is the neighbours' own samples
+    // (read from the pyramid, not extrapolated), so normals at shared edges agree: the
+    // east ring column of this tile is the second column of its eastern neighbour, the
+    // south ring row the second row of its southern one.
+    let g = globus_terrain::grid::HEIGHT_GRID_SIDE;
+    let at = |t: &globus_stream::TerrainData, i: usize, j: usize| t.tile.heights_m[j * g + i];
+    let east = source
+        .load(TileKey::new(10, key.x() + 1, key.y()), &cancel)
+        .expect("load")
+        .expect("east neighbour");
+    let south = source
+        .load(TileKey::new(10, key.x(), key.y() + 1), &cancel)
+        .expect("load")
+        .expect("south neighbour");
+    let (mut worst, mut extrapolated_gap): (f32, f32) = (0.0, 0.0);
+    for k in 1..g - 1 {
+        // Ring column g - 1 of this tile against column 2 of the east one (column 1 is
+        // the shared edge), same row.
+        worst = worst.max((at(&t, g - 1, k) - at(&east, 2, k)).abs());
+        worst = worst.max((at(&t, k, g - 1) - at(&south, k, 2)).abs());
+        // What extrapolating the outermost cell's slope would have given.
+        let guess = 2.0 * at(&t, g - 2, k) - at(&t, g - 3, k);
+        extrapolated_gap = extrapolated_gap.max((guess - at(&east, 2, k)).abs());
+    }
+    assert!(
+        worst < 0.01,
+        "ring differs from the neighbours' samples by {worst} m"
+    );
+    assert!(
+        extrapolated_gap > 1.0,
+        "extrapolation would have matched too ({extrapolated_gap} m): the check proves nothing"
+    );
     // Deeper than the data: no data (refinement takes over); outside the SRTM square at
     // level 5: no data either (nothing finer than the mesh there).
     assert!(
