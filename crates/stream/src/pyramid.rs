@@ -4,6 +4,7 @@
 
 use std::f64::consts::PI;
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use globus_tiling::{GeoRect, TileKey, TilingScheme, lat_to_mercator_y};
 use rustc_hash::FxHashMap;
@@ -144,7 +145,14 @@ pub struct RasterPyramid<T: Samples> {
     decode: Box<Decoder<T>>,
     cache: Mutex<TileCache<T>>,
     cache_bytes: usize,
+    /// Tiles whose last fetch failed transiently, and until when reads on another tile's
+    /// behalf ([`RasterPyramid::tile_for_neighbour`]) leave them alone.
+    failing: Mutex<FxHashMap<TileKey, Instant>>,
 }
+
+/// How long reads on a neighbour's behalf leave a transiently failing tile alone (longer if
+/// the server asked for longer with Retry-After).
+const NEIGHBOUR_QUIET: Duration = Duration::from_secs(10);
 
 impl<T: Samples> RasterPyramid<T> {
     /// A pyramid read through `fetch`, decoded by `decode`, keeping decoded tiles up to
@@ -166,6 +174,7 @@ impl<T: Samples> RasterPyramid<T> {
                 bytes: 0,
             }),
             cache_bytes,
+            failing: Mutex::new(FxHashMap::default()),
         }
     }
 
@@ -203,8 +212,21 @@ impl<T: Samples> RasterPyramid<T> {
                 .decode_checked(key, &f.bytes)
                 .map(|t| Some(Arc::new(t))),
             Err(FetchError::Permanent(m)) => Err(m),
-            Err(e) => return Err(e),
+            Err(e) => {
+                if let FetchError::Transient { retry_after, .. } = &e {
+                    let quiet = retry_after.map_or(NEIGHBOUR_QUIET, |r| r.max(NEIGHBOUR_QUIET));
+                    self.failing
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .insert(key, Instant::now() + quiet);
+                }
+                return Err(e);
+            }
         };
+        self.failing
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&key);
         let bytes = entry_bytes(&entry);
         let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
         c.now += 1;
@@ -228,6 +250,29 @@ impl<T: Samples> RasterPyramid<T> {
         }
         c.bytes += bytes;
         entry.map_err(FetchError::Permanent)
+    }
+
+    /// Like [`RasterPyramid::tile`], for samples a tile reads beyond its own edges: a tile
+    /// whose fetch failed transiently a moment ago is not asked again on a neighbour's
+    /// behalf (its own load retries it on the scheduler's terms, Retry-After included).
+    pub fn tile_for_neighbour(
+        &self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<Arc<T>>, FetchError> {
+        let until = self
+            .failing
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&key)
+            .copied();
+        if until.is_some_and(|u| Instant::now() < u) {
+            return Err(FetchError::transient(format!(
+                "{}: failing, left alone for now",
+                self.fetch.locate(key)
+            )));
+        }
+        self.tile(key, cancel)
     }
 
     fn decode_checked(&self, key: TileKey, bytes: &[u8]) -> Result<T, String> {
@@ -353,6 +398,75 @@ mod tests {
             fetch.0.load(std::sync::atomic::Ordering::Relaxed),
             before + 1
         );
+    }
+
+    /// Fails transiently (with a Retry-After of 30 s) while `failing` is set.
+    struct Flaky {
+        calls: std::sync::atomic::AtomicUsize,
+        failing: std::sync::atomic::AtomicBool,
+    }
+
+    impl Fetch for Flaky {
+        fn name(&self) -> &str {
+            "flaky"
+        }
+        fn fetch(
+            &self,
+            _: TileKey,
+            _: &Cancel,
+        ) -> Result<Option<crate::fetch::Fetched>, FetchError> {
+            use std::sync::atomic::Ordering::Relaxed;
+            self.calls.fetch_add(1, Relaxed);
+            if self.failing.load(Relaxed) {
+                Err(FetchError::Transient {
+                    message: "503".into(),
+                    retry_after: Some(Duration::from_secs(30)),
+                })
+            } else {
+                Ok(Some(crate::fetch::Fetched::local(vec![1])))
+            }
+        }
+    }
+
+    #[test]
+    fn reads_for_a_neighbour_leave_a_failing_tile_alone() {
+        use std::sync::atomic::Ordering::Relaxed;
+        let fetch = Arc::new(Flaky {
+            calls: Default::default(),
+            failing: std::sync::atomic::AtomicBool::new(true),
+        });
+        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
+            Ok(crate::decode::Rgba {
+                width: 256,
+                height: 256,
+                pixels: vec![0; 256 * 256 * 4],
+            })
+        });
+        let p = RasterPyramid::new(
+            fetch.clone(),
+            spec(TilingScheme::WebMercator, SampleGrid::Cells),
+            decode,
+            1 << 20,
+        );
+        let (key, cancel) = (TileKey::new(3, 1, 1), Cancel::new());
+        assert!(p.tile(key, &cancel).is_err());
+        assert_eq!(fetch.calls.load(Relaxed), 1);
+        // A neighbour's read: no request (the server asked for 30 s).
+        assert!(matches!(
+            p.tile_for_neighbour(key, &cancel),
+            Err(FetchError::Transient { .. })
+        ));
+        assert_eq!(fetch.calls.load(Relaxed), 1);
+        // The tile's own load asks again (the scheduler decides when), and once it
+        // succeeds neighbours read it too.
+        fetch.failing.store(false, Relaxed);
+        assert!(p.tile(key, &cancel).expect("own load").is_some());
+        assert!(
+            p.tile_for_neighbour(key, &cancel)
+                .expect("cached")
+                .is_some()
+        );
+        assert_eq!(fetch.calls.load(Relaxed), 2);
     }
 
     #[test]

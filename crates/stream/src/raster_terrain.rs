@@ -116,10 +116,25 @@ impl<'a, T: Samples> Touched<'a, T> {
     }
 
     fn get(&mut self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
+        self.read(key, cancel, false)
+    }
+
+    /// A tile read on a neighbour's behalf ([`RasterPyramid::tile_for_neighbour`]) or for
+    /// this tile itself.
+    fn read(
+        &mut self,
+        key: TileKey,
+        cancel: &Cancel,
+        for_neighbour: bool,
+    ) -> Result<Option<Arc<T>>, FetchError> {
         if let Some(t) = self.tiles.get(&key) {
             return Ok(t.clone());
         }
-        let t = self.pyramid.tile(key, cancel)?;
+        let t = if for_neighbour {
+            self.pyramid.tile_for_neighbour(key, cancel)?
+        } else {
+            self.pyramid.tile(key, cancel)?
+        };
         self.tiles.insert(key, t.clone());
         Ok(t)
     }
@@ -262,7 +277,7 @@ impl RasterTerrainSource {
             for i in 0..side {
                 let inward = |f: f64| f.clamp(EDGE_NUDGE, 1.0 - EDGE_NUDGE);
                 let (lon, lat) = rect.lon_lat_at(inward(i as f64 / n), inward(j as f64 / n));
-                let h = height_from(&mut layers, lon, lat, cancel)?;
+                let h = height_from(&mut layers, lon, lat, false, cancel)?;
                 any_data |= h.is_some();
                 out.push(h.unwrap_or(0.0));
             }
@@ -286,7 +301,7 @@ impl RasterTerrainSource {
                     - std::f64::consts::PI;
                 // A neighbour's source tile that fails leaves the slope extrapolated: the
                 // tile itself is whole.
-                match height_from(&mut layers, lon, lat, cancel) {
+                match height_from(&mut layers, lon, lat, true, cancel) {
                     Ok(h) => h,
                     Err(FetchError::Cancelled) => return Err(FetchError::Cancelled),
                     Err(_) => None,
@@ -463,10 +478,12 @@ fn ring_index(i: i32, j: i32) -> Option<usize> {
 /// The height at a point from elevation layers read at their levels, top layer first (a
 /// layer fades out towards its bounds, where they are not the world's edges, so its data
 /// meets the layer below without a step); `None` if no layer has data there.
+/// `for_neighbour`: the point is outside the tile being built (its normal ring).
 fn height_from(
     layers: &mut [(Touched<'_, HeightImage>, u8)],
     lon: f64,
     lat: f64,
+    for_neighbour: bool,
     cancel: &Cancel,
 ) -> Result<Option<f64>, FetchError> {
     let (mut h, mut remaining, mut any) = (0.0, 1.0, false);
@@ -479,7 +496,7 @@ fn height_from(
         let Some((k, px, py)) = spec.locate(lon, lat, *level) else {
             continue;
         };
-        if let Some(t) = touched.get(k, cancel)? {
+        if let Some(t) = touched.read(k, cancel, for_neighbour)? {
             let v = bilinear(px, py, t.width, t.height, |x, y| {
                 f64::from(t.heights_m[(y * t.width + x) as usize])
             });
