@@ -122,12 +122,24 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
         }
     }
 
-    // Every fault was met: the transient ones retried, the broken tile failed once and for
-    // all (asked once), and its ancestor filled its place in the complete picture above.
+    // Every fault was met: the transient ones got past (asked again after them, by the
+    // tile's own retries or, for elevation, by a neighbour reading its normal ring across
+    // the edge, which never retries), the broken tile failed once and for all (asked once),
+    // and its ancestor filled its place in the complete picture above.
     let stats = off.globe.layer().scheduler_stats();
-    assert!(stats.retries >= 3, "{stats:?}");
+    assert!(stats.retries >= 1, "{stats:?}");
+    assert!(
+        server.count("/topo/1/3/") >= 3,
+        "two 503s and then the tile"
+    );
+    assert!(
+        server.count("/topo/1/2/1.png") >= 2,
+        "a reset and then the tile"
+    );
     assert_eq!(stats.failed, 1, "{stats:?}");
-    assert_eq!(server.count("/topo/1/2/0.png"), 1);
+    // Once by its own load, and at most once more by a neighbour's ring read racing it
+    // (the decoded-tile cache does not merge fetches in flight); never retried.
+    assert!((1..=2).contains(&server.count("/topo/1/2/0.png")));
     assert_eq!(server.count("/bmng/0/1/0.jpg"), 2);
     assert!(frame.load_ms >= 1000.0, "Retry-After: 1 was honoured");
     let _ = std::fs::remove_dir_all(&root);
