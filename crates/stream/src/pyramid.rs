@@ -3,7 +3,7 @@
 //! pyramids of either scheme and of any tile size (Web Mercator is reprojected here).
 
 use std::f64::consts::PI;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use globus_tiling::{GeoRect, TileKey, TilingScheme, lat_to_mercator_y};
@@ -148,7 +148,40 @@ pub struct RasterPyramid<T: Samples> {
     /// Tiles whose last fetch failed transiently, and until when reads on another tile's
     /// behalf ([`RasterPyramid::tile_for_neighbour`]) leave them alone.
     failing: Mutex<FxHashMap<TileKey, Instant>>,
+    /// Fetches under way: a second caller for the same tile (a neighbour's ring read racing
+    /// the tile's own load) waits for the first instead of asking the server again.
+    in_flight: Mutex<FxHashMap<TileKey, Arc<Flight<T>>>>,
 }
+
+/// A fetch under way, and its result once it lands.
+struct Flight<T> {
+    result: Mutex<Option<Result<Option<Arc<T>>, FetchError>>>,
+    landed: Condvar,
+}
+
+/// The leader's side of a [`Flight`]: lands its result and takes it off the map however the
+/// fetch ends (a panicking fetch lands as cancelled, so the followers fetch for themselves).
+struct Landing<'a, T: Samples> {
+    pyramid: &'a RasterPyramid<T>,
+    key: TileKey,
+    flight: Arc<Flight<T>>,
+}
+
+impl<T: Samples> Drop for Landing<'_, T> {
+    fn drop(&mut self) {
+        {
+            let mut r = self.flight.result.lock().unwrap_or_else(|p| p.into_inner());
+            if r.is_none() {
+                *r = Some(Err(FetchError::Cancelled));
+            }
+        }
+        self.flight.landed.notify_all();
+        self.pyramid.end_flight(self.key, &self.flight);
+    }
+}
+
+/// How often a caller waiting on another's fetch looks at its own cancel flag.
+const FOLLOWER_POLL: Duration = Duration::from_millis(20);
 
 /// How long reads on a neighbour's behalf leave a transiently failing tile alone (longer if
 /// the server asked for longer with Retry-After).
@@ -175,6 +208,7 @@ impl<T: Samples> RasterPyramid<T> {
             }),
             cache_bytes,
             failing: Mutex::new(FxHashMap::default()),
+            in_flight: Mutex::new(FxHashMap::default()),
         }
     }
 
@@ -196,16 +230,80 @@ impl<T: Samples> RasterPyramid<T> {
     /// A decoded tile, `None` where the pyramid has none. A tile whose bytes do not decode is
     /// a permanent error, remembered (while it stays in the cache) so it is not fetched again
     /// for every engine tile that needs it.
+    ///
+    /// Concurrent calls for one tile make one request: the others wait for it (each still
+    /// stops when its own `cancel` fires), and take over if the one fetching is cancelled.
     pub fn tile(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
-        {
-            let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
-            c.now += 1;
-            let now = c.now;
-            if let Some(e) = c.tiles.get_mut(&key) {
-                e.1 = now;
-                return e.0.clone().map_err(FetchError::Permanent);
+        loop {
+            {
+                let mut c = self.cache.lock().unwrap_or_else(|p| p.into_inner());
+                c.now += 1;
+                let now = c.now;
+                if let Some(e) = c.tiles.get_mut(&key) {
+                    e.1 = now;
+                    return e.0.clone().map_err(FetchError::Permanent);
+                }
+            }
+            let (flight, leads) = {
+                let mut f = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+                match f.get(&key) {
+                    Some(flight) => (Arc::clone(flight), false),
+                    None => {
+                        let flight = Arc::new(Flight {
+                            result: Mutex::new(None),
+                            landed: Condvar::new(),
+                        });
+                        f.insert(key, Arc::clone(&flight));
+                        (flight, true)
+                    }
+                }
+            };
+            if leads {
+                let landing = Landing {
+                    pyramid: self,
+                    key,
+                    flight,
+                };
+                let result = self.fetch_and_keep(key, cancel);
+                *landing
+                    .flight
+                    .result
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner()) = Some(result.clone());
+                return result;
+            }
+            let mut r = flight.result.lock().unwrap_or_else(|p| p.into_inner());
+            loop {
+                match r.as_ref() {
+                    // The one fetching was cancelled: fetch it ourselves (or find it cached).
+                    Some(Err(FetchError::Cancelled)) => {
+                        self.end_flight(key, &flight);
+                        break;
+                    }
+                    Some(done) => return done.clone(),
+                    None if cancel.is_cancelled() => return Err(FetchError::Cancelled),
+                    None => {
+                        r = flight
+                            .landed
+                            .wait_timeout(r, FOLLOWER_POLL)
+                            .unwrap_or_else(|p| p.into_inner())
+                            .0;
+                    }
+                }
             }
         }
+    }
+
+    /// Takes `flight` off the map (unless a newer one for `key` has replaced it).
+    fn end_flight(&self, key: TileKey, flight: &Arc<Flight<T>>) {
+        let mut f = self.in_flight.lock().unwrap_or_else(|p| p.into_inner());
+        if f.get(&key).is_some_and(|g| Arc::ptr_eq(g, flight)) {
+            f.remove(&key);
+        }
+    }
+
+    /// Fetches and decodes a tile, keeping the outcome in the cache unless it was transient.
+    fn fetch_and_keep(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
         let entry = match self.fetch.fetch(key, cancel) {
             Ok(None) => Ok(None),
             Ok(Some(f)) => self
@@ -467,6 +565,121 @@ mod tests {
                 .is_some()
         );
         assert_eq!(fetch.calls.load(Relaxed), 2);
+    }
+
+    /// Holds every fetch until opened (or until the caller is cancelled), counting them.
+    #[derive(Default)]
+    struct Gated {
+        calls: std::sync::atomic::AtomicUsize,
+        open: std::sync::atomic::AtomicBool,
+    }
+
+    impl Fetch for Gated {
+        fn name(&self) -> &str {
+            "gated"
+        }
+        fn fetch(
+            &self,
+            _: TileKey,
+            cancel: &Cancel,
+        ) -> Result<Option<crate::fetch::Fetched>, FetchError> {
+            use std::sync::atomic::Ordering::SeqCst;
+            self.calls.fetch_add(1, SeqCst);
+            while !self.open.load(SeqCst) {
+                if cancel.is_cancelled() {
+                    return Err(FetchError::Cancelled);
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            Ok(Some(crate::fetch::Fetched::local(vec![1])))
+        }
+    }
+
+    fn gated_pyramid() -> (Arc<Gated>, Arc<RasterPyramid<crate::decode::Rgba>>) {
+        let fetch = Arc::new(Gated::default());
+        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
+            Ok(crate::decode::Rgba {
+                width: 256,
+                height: 256,
+                pixels: vec![0; 256 * 256 * 4],
+            })
+        });
+        let p = RasterPyramid::new(
+            fetch.clone(),
+            spec(TilingScheme::WebMercator, SampleGrid::Cells),
+            decode,
+            1 << 20,
+        );
+        (fetch, Arc::new(p))
+    }
+
+    /// Waits (real time, 10 s at most) until `cond` holds.
+    fn eventually(what: &str, cond: impl Fn() -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !cond() {
+            assert!(Instant::now() < deadline, "timed out waiting: {what}");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    #[test]
+    fn concurrent_reads_of_one_tile_make_one_request() {
+        use std::sync::atomic::Ordering::SeqCst;
+        let (fetch, p) = gated_pyramid();
+        let key = TileKey::new(4, 3, 2);
+        let readers: Vec<_> = (0..4)
+            .map(|i| {
+                let p = Arc::clone(&p);
+                std::thread::spawn(move || {
+                    let cancel = Cancel::new();
+                    if i % 2 == 0 {
+                        p.tile(key, &cancel)
+                    } else {
+                        p.tile_for_neighbour(key, &cancel)
+                    }
+                })
+            })
+            .collect();
+        eventually("the first request", || fetch.calls.load(SeqCst) == 1);
+        std::thread::sleep(Duration::from_millis(50));
+        fetch.open.store(true, SeqCst);
+        for r in readers {
+            let got = r.join().expect("reader").expect("tile");
+            assert!(got.is_some());
+        }
+        assert_eq!(fetch.calls.load(SeqCst), 1);
+        assert!(p.in_flight.lock().unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_waiting_reader_takes_over_when_the_fetching_one_is_cancelled() {
+        use std::sync::atomic::Ordering::SeqCst;
+        let (fetch, p) = gated_pyramid();
+        let key = TileKey::new(4, 3, 2);
+        let (first, second, third) = (Cancel::new(), Cancel::new(), Cancel::new());
+        let read = |cancel: &Cancel| {
+            let (p, cancel) = (Arc::clone(&p), cancel.clone());
+            std::thread::spawn(move || p.tile(key, &cancel))
+        };
+        let a = read(&first);
+        eventually("the first request", || fetch.calls.load(SeqCst) == 1);
+        let b = read(&second);
+        let c = read(&third);
+        std::thread::sleep(Duration::from_millis(50));
+        // A waiting reader that is no longer wanted stops waiting; the fetch goes on.
+        third.cancel();
+        assert_eq!(c.join().expect("third"), Err(FetchError::Cancelled));
+        assert_eq!(fetch.calls.load(SeqCst), 1);
+        // The fetching reader is cancelled: the other waiting one fetches for itself.
+        first.cancel();
+        assert_eq!(a.join().expect("first"), Err(FetchError::Cancelled));
+        eventually("the second request", || fetch.calls.load(SeqCst) == 2);
+        fetch.open.store(true, SeqCst);
+        assert!(b.join().expect("second").expect("tile").is_some());
+        assert_eq!(fetch.calls.load(SeqCst), 2);
+        // Kept: a later read makes no request.
+        assert!(p.tile(key, &Cancel::new()).expect("cached").is_some());
+        assert_eq!(fetch.calls.load(SeqCst), 2);
     }
 
     #[test]

@@ -749,6 +749,7 @@ mod tests {
                 .map_or(0, Vec::len)
         };
         eventually("first attempt", || attempts(0) == 1);
+        eventually("first retry scheduled", || s.stats().retries == 1);
         // The clock does not move: no second attempt however long we wait.
         std::thread::sleep(Duration::from_millis(300));
         assert_eq!(attempts(0), 1);
@@ -758,6 +759,7 @@ mod tests {
         clock.advance(Duration::from_millis(250));
         s.poke();
         eventually("second attempt", || attempts(0) == 2);
+        eventually("second retry scheduled", || s.stats().retries == 2);
         clock.advance(Duration::from_millis(500));
         s.poke();
         let (key, outcome) = s.wait_one(Duration::from_secs(10)).expect("outcome");
@@ -782,7 +784,10 @@ mod tests {
         s.submit(&[req(1, 1.0)]);
         let key = TileKey::new(5, 1, 0);
         let attempts = || src.attempts.lock().unwrap().get(&key).map_or(0, Vec::len);
-        eventually("first attempt", || attempts() == 1);
+        // The clock moves only once each failure's retry is scheduled (its time is taken
+        // from the clock when the failure comes back, not when the attempt starts).
+        eventually("first retry scheduled", || s.stats().retries == 1);
+        assert_eq!(attempts(), 1);
         // Retry-After: 30 s. At 29 s nothing happens; at 30 s the second attempt.
         clock.advance(Duration::from_secs(29));
         s.poke();
@@ -792,6 +797,9 @@ mod tests {
             clock.advance(Duration::from_secs(1));
             s.poke();
             eventually("next attempt", || attempts() == n);
+            if n < 4 {
+                eventually("next retry scheduled", || s.stats().retries == n as u64);
+            }
             clock.advance(Duration::from_secs(29));
         }
         // Four attempts in all, then a failure naming the tile.

@@ -287,9 +287,9 @@ fn every_fault_ends_as_a_counted_tile_failure_and_the_rest_completes() {
     }
     // Retry-After was honoured (a second or more), permanent faults were asked once,
     // transient ones three times by their own tile's load (and at most once more when a
-    // neighbouring tile read its normal ring across the edge first: such reads never
-    // retry, and leave a failing tile alone for a while), 404 once (and it is remembered
-    // by the layer above).
+    // neighbouring tile read its normal ring across the edge before that load began: such
+    // reads never retry, leave a failing tile alone for a while, and share a request
+    // already under way), 404 once (and it is remembered by the layer above).
     let requests_for = |k: TileKey| server.count(&url(k));
     assert!(started.elapsed() >= Duration::from_secs(1));
     assert_eq!(requests_for(faulty[1]), 2);
