@@ -438,6 +438,27 @@ mod tests {
         assert_eq!(g.level_for_spacing(1e-12), 12);
     }
 
+    /// A Web Mercator pyramid read through `fetch` whose every tile decodes to 256 x 256 blank
+    /// pixels, keeping `cache_bytes` of them.
+    fn blank_pyramid(
+        fetch: Arc<dyn Fetch>,
+        cache_bytes: usize,
+    ) -> RasterPyramid<crate::decode::Rgba> {
+        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
+            Ok(crate::decode::Rgba {
+                width: 256,
+                height: 256,
+                pixels: vec![0; 256 * 256 * 4],
+            })
+        });
+        RasterPyramid::new(
+            fetch,
+            spec(TilingScheme::WebMercator, SampleGrid::Cells),
+            decode,
+            cache_bytes,
+        )
+    }
+
     /// Tiles whose bytes are their key's level, counting fetches.
     struct Counting(std::sync::atomic::AtomicUsize);
 
@@ -459,21 +480,9 @@ mod tests {
     fn decoded_tiles_stay_within_their_byte_budget() {
         let fetch = Arc::new(Counting(Default::default()));
         let tile_bytes = 256 * 256 * 4;
-        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
-            Ok(crate::decode::Rgba {
-                width: 256,
-                height: 256,
-                pixels: vec![0; 256 * 256 * 4],
-            })
-        });
         // Room for five tiles and their records, not six.
         let budget = 5 * tile_bytes + 5 * 64 + 100;
-        let p = RasterPyramid::new(
-            fetch.clone(),
-            spec(TilingScheme::WebMercator, SampleGrid::Cells),
-            decode,
-            budget,
-        );
+        let p = blank_pyramid(fetch.clone(), budget);
         let cancel = Cancel::new();
         let keys: Vec<TileKey> = (0..40).map(|x| TileKey::new(6, x, 7)).collect();
         for k in &keys {
@@ -533,19 +542,7 @@ mod tests {
             calls: Default::default(),
             failing: std::sync::atomic::AtomicBool::new(true),
         });
-        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
-            Ok(crate::decode::Rgba {
-                width: 256,
-                height: 256,
-                pixels: vec![0; 256 * 256 * 4],
-            })
-        });
-        let p = RasterPyramid::new(
-            fetch.clone(),
-            spec(TilingScheme::WebMercator, SampleGrid::Cells),
-            decode,
-            1 << 20,
-        );
+        let p = blank_pyramid(fetch.clone(), 1 << 20);
         let (key, cancel) = (TileKey::new(3, 1, 1), Cancel::new());
         assert!(p.tile(key, &cancel).is_err());
         assert_eq!(fetch.calls.load(Relaxed), 1);
@@ -597,19 +594,7 @@ mod tests {
 
     fn gated_pyramid() -> (Arc<Gated>, Arc<RasterPyramid<crate::decode::Rgba>>) {
         let fetch = Arc::new(Gated::default());
-        let decode: Box<Decoder<crate::decode::Rgba>> = Box::new(|_| {
-            Ok(crate::decode::Rgba {
-                width: 256,
-                height: 256,
-                pixels: vec![0; 256 * 256 * 4],
-            })
-        });
-        let p = RasterPyramid::new(
-            fetch.clone(),
-            spec(TilingScheme::WebMercator, SampleGrid::Cells),
-            decode,
-            1 << 20,
-        );
+        let p = blank_pyramid(fetch.clone(), 1 << 20);
         (fetch, Arc::new(p))
     }
 
