@@ -402,6 +402,7 @@ pub fn bilinear(px: f64, py: f64, w: u32, h: u32, get: impl Fn(u32, u32) -> f64)
 #[cfg(test)]
 mod tests {
     use super::*;
+    use globus_test_support::eventually;
 
     fn spec(scheme: TilingScheme, grid: SampleGrid) -> PyramidSpec {
         PyramidSpec {
@@ -596,15 +597,6 @@ mod tests {
         let fetch = Arc::new(Gated::default());
         let p = blank_pyramid(fetch.clone(), 1 << 20);
         (fetch, Arc::new(p))
-    }
-
-    /// Waits (real time, 10 s at most) until `cond` holds.
-    fn eventually(what: &str, cond: impl Fn() -> bool) {
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while !cond() {
-            assert!(Instant::now() < deadline, "timed out waiting: {what}");
-            std::thread::sleep(Duration::from_millis(1));
-        }
     }
 
     #[test]

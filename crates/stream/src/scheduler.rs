@@ -523,6 +523,7 @@ fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use globus_test_support::eventually;
     use globus_tiling::TilingScheme;
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::time::Duration;
@@ -706,18 +707,6 @@ mod tests {
         };
         let s = Scheduler::with_clock(Arc::clone(&src), options, clock.clone());
         (clock, src, s)
-    }
-
-    /// Waits (real time) until `cond` holds.
-    fn eventually(what: &str, cond: impl Fn() -> bool) {
-        let deadline = std::time::Instant::now() + Duration::from_secs(10);
-        while !cond() {
-            assert!(
-                std::time::Instant::now() < deadline,
-                "timed out waiting: {what}"
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
     }
 
     #[test]

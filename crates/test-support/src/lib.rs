@@ -5,6 +5,7 @@
 //! * [`image`](mod@image): reading, comparing and inspecting rendered frames.
 //! * [`http::FaultServer`]: a real HTTP server on 127.0.0.1 that injects faults.
 //! * [`shared_data`]: the path of a file in `../shared/data`.
+//! * [`eventually`]: waiting (in real time, bounded) for other threads to reach a state.
 
 pub mod http;
 pub mod image;
@@ -42,4 +43,17 @@ pub fn assert_one_line_failure(what: &str, out: &std::process::Output, needles: 
         assert!(err.contains(n), "{what}: {err} (wanted {n:?})");
     }
     assert!(!err.contains("panicked"), "{what}: {err}");
+}
+
+/// Waits (real time, polling every millisecond) until `cond` holds; panics naming `what`
+/// after 10 s, so a test of threads fails instead of hanging.
+pub fn eventually(what: &str, cond: impl Fn() -> bool) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while !cond() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting: {what}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
 }
