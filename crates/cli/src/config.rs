@@ -41,7 +41,7 @@ use globus_stream::fetch::DiskCacheOptions;
 use globus_stream::open::SourceSpec;
 use serde::Deserialize;
 
-use crate::engine::GlobeOptions;
+use globus_engine::GlobeBuilder;
 
 /// The file's contents.
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -49,7 +49,7 @@ use crate::engine::GlobeOptions;
 pub struct Config {
     /// Screen-space error bound, pixels.
     pub sse: Option<f64>,
-    /// One budget for all memory, MiB ([`crate::memory`]).
+    /// One budget for all memory, MiB ([`globus_engine::memory`]).
     pub memory_mb: Option<u64>,
     /// CPU cache budget, MiB.
     pub cache_mb: Option<u64>,
@@ -60,7 +60,7 @@ pub struct Config {
     /// Deepest level procedural refinement goes to.
     pub refine_to_level: Option<u8>,
     /// Frames ahead a moving camera's requests look
-    /// ([`GlobeOptions::request_lookahead_frames`]).
+    /// ([`GlobeBuilder::request_lookahead_frames`]).
     pub request_lookahead_frames: Option<f64>,
     /// HTTP settings.
     pub http: Option<HttpConfig>,
@@ -178,53 +178,57 @@ impl Config {
         self.cache_mb.is_some() || self.gpu_tiles.is_some()
     }
 
-    /// Applies the file to `options` (before command-line flags are).
-    pub fn apply(&self, options: &mut GlobeOptions) {
+    /// Applies the file to `builder` (before command-line flags are).
+    pub fn apply(&self, builder: &mut GlobeBuilder) {
         if let Some(s) = self.sse {
-            options.max_sse_px = s;
+            builder.max_sse_px(s);
         }
         if let Some(mb) = self.memory_mb {
-            options.memory_bytes = Some(mb << 20);
+            builder.memory_budget(Some(mb << 20));
         }
         if let Some(mb) = self.cache_mb {
-            options.cache_bytes = (mb as usize) << 20;
+            builder.cache_bytes((mb as usize) << 20);
         }
         if let Some(n) = self.gpu_tiles {
-            options.gpu_slots = n;
+            builder.gpu_tiles(n);
         }
         if let Some(n) = self.workers {
-            options.workers = n;
+            builder.workers(n);
         }
         if let Some(l) = self.refine_to_level {
-            options.max_level = l;
+            builder.max_level(l);
         }
         if let Some(f) = self.request_lookahead_frames {
-            options.request_lookahead_frames = f;
+            builder.request_lookahead_frames(f);
         }
         if let Some(h) = &self.http {
+            let mut http = builder.http_options().clone();
             if let Some(ua) = &h.user_agent {
-                options.http.user_agent = ua.clone();
+                http.user_agent = ua.clone();
             }
             if let Some(n) = h.per_host {
-                options.http.per_host = n;
+                http.per_host = n;
             }
             if let Some(t) = h.timeout_s {
-                options.http.response_timeout = Duration::from_secs_f64(t);
-                options.http.read_timeout = Duration::from_secs_f64(t);
+                http.response_timeout = Duration::from_secs_f64(t);
+                http.read_timeout = Duration::from_secs_f64(t);
             }
-            options
-                .http
-                .headers
+            http.headers
                 .extend(h.headers.iter().map(|(k, v)| (k.clone(), v.clone())));
+            builder.http(http);
         }
         if let Some(d) = &self.disk_cache {
-            options.disk_cache = Some(disk_cache_options(
+            builder.disk_cache(Some(disk_cache_options(
                 &d.dir,
                 d.max_mb.unwrap_or(DEFAULT_DISK_CACHE_MB),
-            ));
+            )));
         }
-        options.terrain.extend(self.terrain.iter().cloned());
-        options.imagery.extend(self.imagery.iter().cloned());
+        for spec in &self.terrain {
+            builder.terrain(spec.clone());
+        }
+        for spec in &self.imagery {
+            builder.imagery(spec.clone());
+        }
     }
 }
 
@@ -265,29 +269,33 @@ mod tests {
             "#,
         )
         .expect("valid");
-        let mut o = GlobeOptions::default();
+        let mut o = GlobeBuilder::new();
         c.apply(&mut o);
-        assert_eq!(o.max_sse_px, 3.5);
-        assert_eq!(o.cache_bytes, 256 << 20);
-        assert!(c.sizes_caches() && o.memory_bytes.is_none());
-        let mut m = GlobeOptions::default();
+        assert_eq!(o.error_bound_px(), 3.5);
+        assert_eq!(o.tile_cache_bytes(), 256 << 20);
+        assert!(c.sizes_caches() && o.memory_budget_bytes().is_none());
+        let mut m = GlobeBuilder::new();
         parse("memory_mb = 768").expect("valid").apply(&mut m);
-        assert_eq!(m.memory_bytes, Some(768 << 20));
-        assert_eq!((o.gpu_slots, o.workers, o.max_level), (512, 12, 22));
-        assert_eq!(o.request_lookahead_frames, 0.0);
-        assert_eq!(o.http.user_agent, "test/1");
-        assert_eq!(o.http.per_host, 4);
-        assert_eq!(o.http.read_timeout, Duration::from_secs(7));
+        assert_eq!(m.memory_budget_bytes(), Some(768 << 20));
         assert_eq!(
-            o.http.headers,
+            (o.gpu_tile_slots(), o.worker_threads(), o.deepest_level()),
+            (512, 12, 22)
+        );
+        assert_eq!(o.lookahead_frames(), 0.0);
+        let http = o.http_options();
+        assert_eq!(http.user_agent, "test/1");
+        assert_eq!(http.per_host, 4);
+        assert_eq!(http.read_timeout, Duration::from_secs(7));
+        assert_eq!(
+            http.headers,
             vec![("X-Api-Key".to_string(), "k".to_string())]
         );
-        let d = o.disk_cache.expect("disk cache");
+        let d = o.disk_cache_options().expect("disk cache");
         assert_eq!(d.max_bytes, DEFAULT_DISK_CACHE_MB << 20);
-        assert_eq!(o.terrain.len(), 1);
-        assert_eq!(o.terrain[0].maxzoom, Some(15));
+        assert_eq!(o.terrain_layers().len(), 1);
+        assert_eq!(o.terrain_layers()[0].maxzoom, Some(15));
         assert_eq!(
-            o.imagery[0].subdomains.as_deref(),
+            o.imagery_layers()[0].subdomains.as_deref(),
             Some(&["a".to_string(), "b".to_string()][..])
         );
     }

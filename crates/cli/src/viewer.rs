@@ -1,34 +1,34 @@
-//! `globus view`: a window on the planet with globe camera controls.
+//! `globus view`: a window on the planet, driven by the engine's [`CameraController`].
 //!
-//! * Left drag: rotates the globe so the grabbed point stays under the cursor.
+//! * Left drag: pans (the grabbed point stays under the cursor).
 //! * Wheel: zooms towards the point under the cursor, by a fifth of the height above ground
 //!   per notch (never below 1 m above the ground).
-//! * Right drag: turns (horizontal) and tilts (vertical) the camera where it stands.
+//! * Right drag: looks around (turns and tilts the camera where it stands).
+//! * Middle drag, or Ctrl + left drag: orbits the ground point under the cursor.
+//! * F: flies to the point under the cursor; Home: flies back to the start.
 //! * W/A/S/D fly forward/left/back/right, Q/E down/up, at a speed proportional to the height
 //!   above ground; Esc quits.
 //!
 //! The title shows frames per second, tiles drawn and tiles loading.
 
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
-use globus_geo::{DQuat, DVec3, View};
-use globus_render::{DepthTarget, GpuContext};
+use globus_engine::{CameraController, CameraSpec, Globe, GlobeBuilder, GpuContext, View};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
-use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
-
-use crate::engine::{CameraSpec, Globe, GlobeOptions};
 
 /// Settings of the viewer.
 #[derive(Clone, Debug)]
 pub struct ViewerOptions {
     /// The globe.
-    pub globe: GlobeOptions,
+    pub globe: GlobeBuilder,
     /// Where the camera starts.
     pub camera: CameraSpec,
     /// Vertical field of view, degrees.
@@ -41,8 +41,11 @@ pub struct ViewerOptions {
     pub exit_after: Option<Duration>,
 }
 
+/// Seconds a fly-to takes.
+const FLIGHT_S: f64 = 3.0;
+
 /// Opens the window and runs until it is closed.
-pub fn run(options: ViewerOptions) -> anyhow::Result<()> {
+pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
     if cfg!(target_os = "linux")
         && std::env::var_os("DISPLAY").is_none()
         && std::env::var_os("WAYLAND_DISPLAY").is_none()
@@ -55,10 +58,9 @@ pub fn run(options: ViewerOptions) -> anyhow::Result<()> {
         anyhow!("cannot open a window ({e}); use `globus render` to draw a frame offscreen")
     })?;
     // Sources first: one that cannot be opened fails before a window opens.
-    let source = crate::engine::terrain_source(&options.globe)?;
+    options.globe.open_sources()?;
     let mut app = App {
         options,
-        source,
         state: None,
         error: None,
         started: Instant::now(),
@@ -74,33 +76,33 @@ pub fn run(options: ViewerOptions) -> anyhow::Result<()> {
 
 struct App {
     options: ViewerOptions,
-    source: Arc<dyn globus_stream::TerrainSource>,
     state: Option<State>,
     error: Option<anyhow::Error>,
     started: Instant,
+}
+
+/// Which drag is under way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Drag {
+    Pan,
+    Orbit,
+    Look(PhysicalPosition<f64>),
 }
 
 struct State {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
-    ctx: GpuContext,
+    gpu: GpuContext,
     globe: Globe,
-    depth: DepthTarget,
-    view: View,
-    input: Input,
-    fps: FpsCounter,
-}
-
-#[derive(Default)]
-struct Input {
+    controller: CameraController,
+    start: View,
     cursor: PhysicalPosition<f64>,
-    /// The grabbed world point and its distance from the centre, while left-dragging.
-    grab: Option<(DVec3, f64)>,
-    /// The cursor position when the right drag last moved.
-    look: Option<PhysicalPosition<f64>>,
-    keys: std::collections::HashSet<KeyCode>,
-    last_tick: Option<Instant>,
+    drag: Option<Drag>,
+    modifiers: ModifiersState,
+    keys: HashSet<KeyCode>,
+    last_tick: Instant,
+    fps: FpsCounter,
 }
 
 struct FpsCounter {
@@ -114,7 +116,7 @@ impl ApplicationHandler for App {
         if self.state.is_some() {
             return;
         }
-        match State::new(event_loop, &self.options, Arc::clone(&self.source)) {
+        match State::new(event_loop, &self.options) {
             Ok(s) => {
                 s.window.request_redraw();
                 self.state = Some(s);
@@ -132,6 +134,7 @@ impl ApplicationHandler for App {
         };
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::ModifiersChanged(m) => state.modifiers = m.state(),
             WindowEvent::KeyboardInput {
                 event:
                     KeyEvent {
@@ -144,9 +147,9 @@ impl ApplicationHandler for App {
                 if code == KeyCode::Escape {
                     event_loop.exit();
                 } else if key_state == ElementState::Pressed {
-                    state.input.keys.insert(code);
+                    state.key_pressed(code);
                 } else {
-                    state.input.keys.remove(&code);
+                    state.keys.remove(&code);
                 }
             }
             WindowEvent::Resized(size) => state.resize(size),
@@ -159,7 +162,8 @@ impl ApplicationHandler for App {
                     MouseScrollDelta::LineDelta(_, y) => f64::from(y),
                     MouseScrollDelta::PixelDelta(p) => p.y / 60.0,
                 };
-                state.zoom(notches);
+                let (x, y) = (state.cursor.x, state.cursor.y);
+                state.controller.zoom(&state.globe, x, y, notches);
             }
             WindowEvent::RedrawRequested => {
                 if let Err(e) = state.redraw() {
@@ -186,11 +190,7 @@ impl ApplicationHandler for App {
 }
 
 impl State {
-    fn new(
-        event_loop: &ActiveEventLoop,
-        options: &ViewerOptions,
-        source: Arc<dyn globus_stream::TerrainSource>,
-    ) -> anyhow::Result<Self> {
+    fn new(event_loop: &ActiveEventLoop, options: &ViewerOptions) -> anyhow::Result<Self> {
         let attributes = Window::default_attributes()
             .with_title("Globus")
             .with_inner_size(PhysicalSize::new(options.width, options.height));
@@ -214,9 +214,9 @@ impl State {
             ..Default::default()
         }))
         .map_err(|e| anyhow!("no graphics adapter can draw into the window: {e}"))?;
-        let ctx = GpuContext::with_adapter(instance, adapter)?;
+        let gpu = GpuContext::with_adapter(instance, adapter)?;
         let size = window.inner_size();
-        let caps = surface.get_capabilities(&ctx.adapter);
+        let caps = surface.get_capabilities(&gpu.adapter);
         let format = caps
             .formats
             .iter()
@@ -225,28 +225,33 @@ impl State {
             .or_else(|| caps.formats.first().copied())
             .context("the window surface offers no pixel format")?;
         let config = surface
-            .get_default_config(&ctx.adapter, size.width.max(1), size.height.max(1))
+            .get_default_config(&gpu.adapter, size.width.max(1), size.height.max(1))
             .map(|c| wgpu::SurfaceConfiguration {
                 format,
                 present_mode: wgpu::PresentMode::AutoVsync,
                 ..c
             })
             .context("the window surface is not supported by the adapter")?;
-        surface.configure(&ctx.device, &config);
-        let globe = Globe::with_source(&ctx.device, format, &options.globe, source)?;
-        let view = options
+        surface.configure(&gpu.device, &config);
+        let mut builder = options.globe.clone();
+        builder.viewport(config.width, config.height);
+        let globe = builder.build(&gpu, format)?;
+        let start = options
             .camera
             .view(&globe, options.fov_deg, config.width, config.height);
-        let depth = DepthTarget::new(&ctx.device, config.width, config.height);
         Ok(Self {
             window,
             surface,
             config,
-            ctx,
+            gpu,
             globe,
-            depth,
-            view,
-            input: Input::default(),
+            controller: CameraController::new(start),
+            start,
+            cursor: PhysicalPosition::default(),
+            drag: None,
+            modifiers: ModifiersState::default(),
+            keys: HashSet::new(),
+            last_tick: Instant::now(),
             fps: FpsCounter {
                 frames: 0,
                 since: Instant::now(),
@@ -261,159 +266,122 @@ impl State {
         }
         self.config.width = size.width;
         self.config.height = size.height;
-        self.surface.configure(&self.ctx.device, &self.config);
-        self.depth = DepthTarget::new(&self.ctx.device, size.width, size.height);
-        self.view.width_px = size.width;
-        self.view.height_px = size.height;
+        self.surface.configure(&self.gpu.device, &self.config);
+        self.controller.resize(size.width, size.height);
     }
 
-    /// Height of the eye above the ground, metres.
-    fn height_above_ground(&self) -> f64 {
-        let e = self.globe.ellipsoid();
-        let c = e
-            .ecef_to_cartographic(self.view.position)
-            .unwrap_or_default();
-        c.height_m - self.globe.ground_height_m(c.lon_rad, c.lat_rad)
-    }
-
-    /// The surface point under a pixel: the ellipsoid hit raised to the ground there.
-    fn pick(&self, x: f64, y: f64) -> Option<DVec3> {
-        let e = self.globe.ellipsoid();
-        let dir = self.view.ray_direction(x, y);
-        let hit = e.ray_hit(self.view.position, dir)?;
-        let c = e.ecef_to_cartographic(hit)?;
-        let ground = self.globe.ground_height_m(c.lon_rad, c.lat_rad);
-        let raised = e.grown(ground.max(0.0));
-        raised.ray_hit(self.view.position, dir).or(Some(hit))
+    fn key_pressed(&mut self, code: KeyCode) {
+        match code {
+            KeyCode::KeyF => {
+                let view = *self.controller.view();
+                let target =
+                    self.controller
+                        .ground_under(&self.globe, self.cursor.x, self.cursor.y);
+                let up = self
+                    .globe
+                    .ellipsoid()
+                    .geodetic_normal(view.position)
+                    .unwrap_or(globus_engine::DVec3::Z);
+                if let Some(point) = target
+                    && let Some(eye_dir) = (view.position - point).try_normalize()
+                {
+                    let distance = (view.position - point).length() * 0.25;
+                    let eye = point + eye_dir * distance.max(10.0);
+                    if let Some(to) = View::look_at(
+                        eye,
+                        point,
+                        up,
+                        view.fov_y_rad,
+                        view.width_px,
+                        view.height_px,
+                    ) {
+                        self.controller
+                            .fly_to(&self.globe, to, Duration::from_secs_f64(FLIGHT_S));
+                    }
+                }
+            }
+            KeyCode::Home => {
+                let to = View {
+                    width_px: self.config.width,
+                    height_px: self.config.height,
+                    ..self.start
+                };
+                self.controller
+                    .fly_to(&self.globe, to, Duration::from_secs_f64(FLIGHT_S));
+            }
+            _ => {
+                self.keys.insert(code);
+            }
+        }
     }
 
     fn mouse_button(&mut self, button: MouseButton, pressed: bool) {
-        let (x, y) = (self.input.cursor.x, self.input.cursor.y);
-        match (button, pressed) {
-            (MouseButton::Left, true) => {
-                self.input.grab = self.pick(x, y).map(|p| (p, p.length()));
-            }
-            (MouseButton::Left, false) => self.input.grab = None,
-            (MouseButton::Right, true) => self.input.look = Some(self.input.cursor),
-            (MouseButton::Right, false) => self.input.look = None,
-            _ => {}
+        let (x, y) = (self.cursor.x, self.cursor.y);
+        let orbit_key = self.modifiers.control_key();
+        if !pressed {
+            self.controller.end_pan();
+            self.controller.end_orbit();
+            self.drag = None;
+            return;
         }
+        self.drag = match button {
+            MouseButton::Left if orbit_key => self
+                .controller
+                .begin_orbit(&self.globe, x, y)
+                .then_some(Drag::Orbit),
+            MouseButton::Middle => self
+                .controller
+                .begin_orbit(&self.globe, x, y)
+                .then_some(Drag::Orbit),
+            MouseButton::Left => self
+                .controller
+                .begin_pan(&self.globe, x, y)
+                .then_some(Drag::Pan),
+            MouseButton::Right => Some(Drag::Look(self.cursor)),
+            _ => self.drag,
+        };
     }
 
     fn cursor_moved(&mut self, position: PhysicalPosition<f64>) {
-        self.input.cursor = position;
-        if let Some((grabbed, radius)) = self.input.grab {
-            let dir = self.view.ray_direction(position.x, position.y);
-            if let Some((t, _)) =
-                globus_geo::Ellipsoid::sphere(radius).intersect_ray(self.view.position, dir)
-                && t > 0.0
-            {
-                let under_cursor = self.view.position + dir * t;
-                // Rotate the camera about the centre so the ray through the cursor meets the
-                // grabbed point again.
-                let q = DQuat::from_rotation_arc(under_cursor.normalize(), grabbed.normalize());
-                self.view.position = q * self.view.position;
-                self.view.orientation = (q * self.view.orientation).normalize();
+        let last = self.cursor;
+        self.cursor = position;
+        match self.drag {
+            Some(Drag::Pan) => self.controller.pan_to(&self.globe, position.x, position.y),
+            Some(Drag::Orbit) => {
+                let per_px = std::f64::consts::PI / f64::from(self.config.height.max(1));
+                self.controller.orbit_by(
+                    &self.globe,
+                    position.x - last.x,
+                    position.y - last.y,
+                    per_px,
+                );
             }
-        }
-        if let Some(last) = self.input.look {
-            let (dx, dy) = (position.x - last.x, position.y - last.y);
-            let per_px = self.view.fov_y_rad / f64::from(self.view.height_px.max(1));
-            let up = self
-                .globe
-                .ellipsoid()
-                .geodetic_normal(self.view.position)
-                .unwrap_or(DVec3::Z);
-            let turn = DQuat::from_axis_angle(up, -dx * per_px);
-            let right = self.view.right();
-            let tilt = DQuat::from_axis_angle(right, -dy * per_px);
-            let candidate = (turn * tilt * self.view.orientation).normalize();
-            // Keep the horizon level-ish: refuse to tilt past straight up or down.
-            let forward = candidate * DVec3::NEG_Z;
-            if forward.dot(up).abs() < 0.999 {
-                self.view.orientation = candidate;
-            } else {
-                self.view.orientation = (turn * self.view.orientation).normalize();
+            Some(Drag::Look(from)) => {
+                self.controller
+                    .look(&self.globe, position.x - from.x, position.y - from.y);
+                self.drag = Some(Drag::Look(position));
             }
-            self.input.look = Some(position);
+            None => {}
         }
     }
 
-    fn zoom(&mut self, notches: f64) {
-        let h = self.height_above_ground().max(1.0);
-        let (x, y) = (self.input.cursor.x, self.input.cursor.y);
-        let target = self.pick(x, y);
-        let dir = match target {
-            Some(t) => (t - self.view.position).normalize_or_zero(),
-            None => self.view.forward(),
-        };
-        let step = if notches > 0.0 {
-            0.2 * h * notches.min(5.0)
-        } else {
-            -0.25 * h * (-notches).min(5.0)
-        };
-        let step = match target {
-            Some(t) => step.min((t - self.view.position).length() - 1.0),
-            None => step,
-        };
-        self.move_by(dir * step);
-    }
-
-    /// Moves the eye, keeping it at least 1 m above the ground and within 100,000 km.
-    fn move_by(&mut self, delta: DVec3) {
-        let e = self.globe.ellipsoid();
-        let candidate = self.view.position + delta;
-        let Some(mut c) = e.ecef_to_cartographic(candidate) else {
-            return;
-        };
-        let ground = self.globe.ground_height_m(c.lon_rad, c.lat_rad);
-        c.height_m = c.height_m.clamp(ground + 1.0, 1.0e8);
-        let old_up = e.geodetic_normal(self.view.position).unwrap_or(DVec3::Z);
-        self.view.position = e.cartographic_to_ecef(c);
-        // Carry the orientation along the curve of the planet.
-        let new_up = e.geodetic_normal(self.view.position).unwrap_or(DVec3::Z);
-        let q = DQuat::from_rotation_arc(old_up, new_up);
-        self.view.orientation = (q * self.view.orientation).normalize();
-    }
-
-    fn fly(&mut self) {
+    fn tick(&mut self) {
         let now = Instant::now();
-        let dt = self
-            .input
-            .last_tick
-            .map_or(0.0, |t| (now - t).as_secs_f64())
-            .min(0.1);
-        self.input.last_tick = Some(now);
-        if self.input.keys.is_empty() || dt == 0.0 {
-            return;
-        }
-        let speed = self.height_above_ground().max(1.0) * 1.5;
-        let up = self
-            .globe
-            .ellipsoid()
-            .geodetic_normal(self.view.position)
-            .unwrap_or(DVec3::Z);
-        let forward =
-            (self.view.forward() - up * self.view.forward().dot(up)).normalize_or(self.view.up());
-        let right = forward.cross(up);
-        let mut v = DVec3::ZERO;
-        for (key, dir) in [
-            (KeyCode::KeyW, forward),
-            (KeyCode::KeyS, -forward),
-            (KeyCode::KeyD, right),
-            (KeyCode::KeyA, -right),
-            (KeyCode::KeyE, up),
-            (KeyCode::KeyQ, -up),
-        ] {
-            if self.input.keys.contains(&key) {
-                v += dir;
-            }
-        }
-        self.move_by(v * speed * dt);
+        let dt = now - self.last_tick;
+        self.last_tick = now;
+        self.controller.update(&self.globe, dt);
+        let axis = |plus: KeyCode, minus: KeyCode| {
+            f64::from(u8::from(self.keys.contains(&plus)))
+                - f64::from(u8::from(self.keys.contains(&minus)))
+        };
+        let forward = axis(KeyCode::KeyW, KeyCode::KeyS);
+        let right = axis(KeyCode::KeyD, KeyCode::KeyA);
+        let up = axis(KeyCode::KeyE, KeyCode::KeyQ);
+        self.controller.fly(&self.globe, forward, right, up, dt);
     }
 
     fn redraw(&mut self) -> anyhow::Result<()> {
-        self.fly();
+        self.tick();
         let frame = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t)
             | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
@@ -421,27 +389,26 @@ impl State {
                 return Ok(());
             }
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                self.surface.configure(&self.ctx.device, &self.config);
+                self.surface.configure(&self.gpu.device, &self.config);
                 return Ok(());
             }
             other => bail!("the window surface failed: {other:?}"),
         };
-        let report = self
-            .globe
-            .frame(&self.ctx.device, &self.ctx.queue, &self.view);
+        let view = *self.controller.view();
+        let report = self.globe.update(&view);
         let target = frame
             .texture
             .create_view(&wgpu::TextureViewDescriptor::default());
         let mut encoder = self
-            .ctx
+            .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.globe.render(&mut encoder, &target, &self.depth.view);
-        self.ctx.queue.submit([encoder.finish()]);
+        self.globe.render(&mut encoder, &target, &mut []);
+        self.gpu.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
-        self.ctx.queue.present(frame);
+        self.gpu.queue.present(frame);
 
         self.fps.frames += 1;
         let elapsed = self.fps.since.elapsed().as_secs_f64();
@@ -456,7 +423,7 @@ impl State {
                 report.draw.tiles,
                 report.wanted,
                 report.colours_pending,
-                self.height_above_ground()
+                self.controller.height_above_ground_m(&self.globe)
             ));
         }
         Ok(())

@@ -19,6 +19,9 @@ pub enum RenderError {
     /// The window surface could not be created or configured.
     #[error("cannot draw into the window: {0}")]
     Surface(String),
+    /// Reading a frame or a pixel back from the GPU failed.
+    #[error("cannot read the frame back: {0}")]
+    Readback(String),
 }
 
 /// A wgpu instance, adapter, device and queue.

@@ -4,23 +4,24 @@
 //! 1. [`GlobeRenderer::prepare`] (CPU): writes the frame uniforms, each drawn tile's
 //!    centre-to-eye offset (subtracted in f64, then rounded to f32) at its pool slot, and one
 //!    indirect draw record per drawn tile (its index range and base vertex in the pools).
-//! 2. [`GlobeRenderer::render`] (GPU): draws the sky with a full-screen triangle, then every
-//!    terrain tile, whatever its mesh, with one `multi_draw_indexed_indirect` over the shared
-//!    vertex and index pools. Each vertex carries its slot, which picks its offset and its
+//! 2. [`GlobeRenderer::draw`] (GPU): records, into a render pass the caller began (colour,
+//!    id buffer and depth, see [`crate::FrameFormats`]), the sky with a full-screen triangle,
+//!    then every terrain tile, whatever its mesh, with one `multi_draw_indexed_indirect` over
+//!    the shared vertex and index pools. Each vertex carries its slot, which picks its offset and its
 //!    colour: a layer of the colour pool and the part of it over the tile (its own layer
 //!    whole, or an ancestor's cropped while its own imagery loads).
 
 use std::mem::size_of;
 
 use bytemuck::{Pod, Zeroable};
-use globus_geo::{DVec3, View};
+use globus_geo::DVec3;
 use globus_terrain::TerrainVertex;
 use globus_tiling::TileKey;
 
-use crate::camera::CameraMatrices;
+use crate::camera::FrameCamera;
 use crate::pool::TilePool;
 use crate::shaders;
-use crate::target::DEPTH_FORMAT;
+use crate::target::{DEPTH_FORMAT, FrameFormats};
 
 /// Uniforms shared by all pipelines (mirrors `Frame` in `common.wgsl`).
 #[repr(C)]
@@ -77,10 +78,8 @@ impl Lighting {
 
 /// What one frame draws.
 pub struct FrameInputs<'a> {
-    /// The camera.
-    pub view: &'a View,
-    /// Near plane distance, metres.
-    pub near_m: f64,
+    /// The camera (eye, matrices, near plane).
+    pub camera: &'a FrameCamera,
     /// Height of the eye above the ellipsoid, metres (f64, for the atmosphere).
     pub eye_height_m: f64,
     /// Geodetic up at the eye.
@@ -128,14 +127,13 @@ pub struct GlobeRenderer {
     indirect_capacity: u32,
     draws: Vec<DrawIndexedArgs>,
     sampler: wgpu::Sampler,
-    /// The GPU tile pools.
-    pub pool: TilePool,
+    pool: TilePool,
     stats: DrawStats,
 }
 
 impl GlobeRenderer {
-    /// Pipelines for rendering into `colour_format` with the given pool.
-    pub fn new(device: &wgpu::Device, colour_format: wgpu::TextureFormat, pool: TilePool) -> Self {
+    /// Pipelines for rendering frames of `formats` with the given pool.
+    pub fn new(device: &wgpu::Device, formats: FrameFormats, pool: TilePool) -> Self {
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -164,9 +162,8 @@ impl GlobeRenderer {
             }],
         });
         let terrain_layout = terrain_bind_group_layout(device);
-        let terrain_pipeline =
-            terrain_pipeline(device, colour_format, &frame_layout, &terrain_layout);
-        let sky_pipeline = sky_pipeline(device, colour_format, &frame_layout);
+        let terrain_pipeline = terrain_pipeline(device, formats, &frame_layout, &terrain_layout);
+        let sky_pipeline = sky_pipeline(device, formats, &frame_layout);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("terrain colour"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -219,14 +216,15 @@ impl GlobeRenderer {
         queue: &wgpu::Queue,
         inputs: &FrameInputs<'_>,
     ) -> DrawStats {
-        let view = inputs.view;
-        let m = CameraMatrices::new(view, inputs.near_m);
+        let camera = inputs.camera;
+        let view = camera.view();
+        let (clip_from_eye, eye_from_clip) = (camera.clip_from_eye(), camera.eye_from_clip());
         let l = &inputs.lighting;
         let sun = l.sun_direction.normalize_or_zero().as_vec3();
         let up = inputs.eye_up.as_vec3();
         let uniforms = FrameUniforms {
-            clip_from_eye: m.clip_from_eye.to_cols_array_2d(),
-            eye_from_clip: m.eye_from_clip.to_cols_array_2d(),
+            clip_from_eye: clip_from_eye.to_cols_array_2d(),
+            eye_from_clip: eye_from_clip.to_cols_array_2d(),
             eye_up_height: [up.x, up.y, up.z, inputs.eye_height_m as f32],
             sun: [sun.x, sun.y, sun.z, l.ambient],
             planet: [
@@ -311,37 +309,20 @@ impl GlobeRenderer {
         self.stats
     }
 
-    /// GPU phase: records the sky and terrain draws into `encoder`.
-    pub fn render(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        colour: &wgpu::TextureView,
-        depth: &wgpu::TextureView,
-    ) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("globe"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: colour,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: depth,
-                // Reversed-Z: 0 is infinitely far.
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(0.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+    /// The GPU tile pools.
+    pub fn pool(&self) -> &TilePool {
+        &self.pool
+    }
+
+    /// The GPU tile pools, to upload into.
+    pub fn pool_mut(&mut self) -> &mut TilePool {
+        &mut self.pool
+    }
+
+    /// GPU phase: records the sky and the terrain prepared last into `pass`, a pass over
+    /// the frame's colour, id and depth targets that the caller began (clearing depth to 0,
+    /// infinitely far, and colour as it likes) and may go on drawing into.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
         pass.set_pipeline(&self.sky_pipeline);
         pass.draw(0..3, 0..1);
@@ -448,7 +429,7 @@ const SLOT_ATTRIBUTES: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![3 =
 
 fn terrain_pipeline(
     device: &wgpu::Device,
-    format: wgpu::TextureFormat,
+    formats: FrameFormats,
     frame_layout: &wgpu::BindGroupLayout,
     terrain_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::RenderPipeline {
@@ -499,11 +480,7 @@ fn terrain_pipeline(
             module: &module,
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
+            targets: &formats.colour_targets(None, false),
         }),
         multiview_mask: None,
         cache: None,
@@ -512,7 +489,7 @@ fn terrain_pipeline(
 
 fn sky_pipeline(
     device: &wgpu::Device,
-    format: wgpu::TextureFormat,
+    formats: FrameFormats,
     frame_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -546,11 +523,7 @@ fn sky_pipeline(
             module: &module,
             entry_point: Some("fs_sky"),
             compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
+            targets: &formats.colour_targets(None, false),
         }),
         multiview_mask: None,
         cache: None,

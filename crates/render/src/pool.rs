@@ -431,6 +431,11 @@ impl TilePool {
         self.residency.get(key)
     }
 
+    /// Which tiles are resident where (plain CPU bookkeeping).
+    pub fn residency(&self) -> &Residency {
+        &self.residency
+    }
+
     /// Whether the tile is resident.
     pub fn is_resident(&self, key: TileKey) -> bool {
         self.residency.get(key).is_some()

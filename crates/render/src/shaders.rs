@@ -15,5 +15,8 @@ pub const SKY: &str = concat!(
     include_str!("shaders/sky.wgsl")
 );
 
+/// Reads one pixel of the depth buffer (picking).
+pub const PICK: &str = include_str!("shaders/pick.wgsl");
+
 /// Every shader, with a name, for validation.
-pub const ALL: [(&str, &str); 2] = [("terrain", TERRAIN), ("sky", SKY)];
+pub const ALL: [(&str, &str); 3] = [("terrain", TERRAIN), ("sky", SKY), ("pick", PICK)];

@@ -20,16 +20,16 @@ fn loaded_layer(view: &View, options: &SelectionOptions) -> TerrainLayer {
         if sel.requests.is_empty() {
             return layer;
         }
-        // Tiles already loaded only wait to be marked drawable (the renderer's upload).
-        let (ready, to_load): (Vec<TileRequest>, Vec<TileRequest>) = sel
+        // Loaded tiles are drawable here (no GPU residency to wait for).
+        let to_load: Vec<TileRequest> = sel
             .requests
             .iter()
-            .partition(|r| layer.get(r.key).is_some());
-        for r in &ready {
-            layer.set_drawable(r.key, true);
-        }
-        layer.update(&sel.draw, &to_load);
-        if ready.is_empty() {
+            .filter(|r| layer.get(r.key).is_none())
+            .copied()
+            .collect();
+        let in_use: Vec<_> = sel.draw.iter().map(|d| d.key).collect();
+        layer.update(&sel.draw, &in_use, &to_load);
+        if to_load.len() == sel.requests.len() {
             layer.wait_for_tiles(Duration::from_millis(500));
         }
     }

@@ -7,8 +7,10 @@
 //! exact records; their children get estimated records (bounds from the parent's heights) as
 //! soon as the parent arrives, so they can be culled before they are loaded.
 //!
-//! A loaded tile is reported as [`TileState::Loaded`] only once the renderer has marked it
-//! drawable ([`TerrainLayer::set_drawable`]): everything selection draws can be drawn now.
+//! A loaded tile is reported as [`TileState::Loaded`] as soon as it is in the cache; an
+//! engine that draws from GPU copies answers selection through an oracle of its own that
+//! also asks whether the tile is resident there (so everything selection draws can be drawn
+//! now), and keeps that record itself.
 //!
 //! Tiles whose imagery loads on its own ([`TerrainData::colour_separate`]) get their colour
 //! from a second scheduler ([`crate::colour_jobs`]), asked for the drawn tiles (and the loaded
@@ -107,8 +109,6 @@ struct Node {
     error_m: f64,
     /// Unloaded (estimate), Loaded, NoData or Failed.
     state: TileState,
-    /// Loaded and ready to draw (set by the renderer).
-    drawable: bool,
 }
 
 /// A cached tile: its data, and its colour once that arrived in a load of its own.
@@ -178,14 +178,6 @@ impl TerrainLayer {
             layer.nodes.insert(root, node);
         }
         layer
-    }
-
-    /// Marks a loaded tile as ready (or no longer ready) to draw: the renderer calls this when
-    /// it uploads or evicts the tile.
-    pub fn set_drawable(&mut self, key: TileKey, drawable: bool) {
-        if let Some(n) = self.nodes.get_mut(&key) {
-            n.drawable = drawable && n.state == TileState::Loaded;
-        }
     }
 
     /// Bytes of loaded tiles (and their colours) in the cache, and its budget.
@@ -269,20 +261,21 @@ impl TerrainLayer {
         self.scheduler.queued() + self.scheduler.in_flight()
     }
 
-    /// One frame's bookkeeping after selection: marks what is drawn (and its ancestors) as
-    /// used, submits the tiles to load (replacing the previous list), takes in arrived tiles
-    /// and evicts to the budget.
-    pub fn update(&mut self, drawn: &[DrawTile], wanted: &[TileRequest]) -> LayerStats {
+    /// One frame's bookkeeping after selection: marks the tiles `in_use` (what is drawn
+    /// and every ancestor of it, which selection walks through) as used this frame, submits
+    /// the tiles to load (replacing the previous list), takes in arrived tiles and evicts to
+    /// the budget (never a tile in use, nor a root). `drawn` is the draw list: its tiles'
+    /// separate colours are asked for first.
+    pub fn update(
+        &mut self,
+        drawn: &[DrawTile],
+        in_use: &[TileKey],
+        wanted: &[TileRequest],
+    ) -> LayerStats {
         self.frame += 1;
         let now = self.frame;
-        for d in drawn {
-            let mut key = Some(d.key);
-            while let Some(k) = key {
-                if !self.cache.touch(k, now) {
-                    break;
-                }
-                key = k.parent();
-            }
+        for &k in in_use {
+            self.cache.touch(k, now);
         }
         if let Some(u) = &mut self.usage {
             u.drawn.extend(drawn.iter().map(|d| d.key));
@@ -381,7 +374,7 @@ impl TerrainLayer {
                 }
                 Outcome::NoData => ch.no_colour(key),
                 Outcome::Failed(e) => {
-                    eprintln!("globus: {e}");
+                    tracing::warn!("imagery: {e}");
                     ch.failures.record(key);
                 }
             }
@@ -408,9 +401,8 @@ impl TerrainLayer {
                 let bytes = data.byte_size();
                 let node = Node {
                     bounds: data.mesh.bounds,
-                    error_m: data.tile.lod_error_m(),
+                    error_m: data.lod_error_m(),
                     state: TileState::Loaded,
-                    drawable: false,
                 };
                 if let Some(children) = key.children() {
                     let child_error = node.error_m * 0.5;
@@ -419,7 +411,6 @@ impl TerrainLayer {
                             bounds: data.child_bounds[i],
                             error_m: child_error,
                             state: TileState::Unloaded,
-                            drawable: false,
                         };
                         self.nodes
                             .entry(child)
@@ -444,7 +435,7 @@ impl TerrainLayer {
                 TileState::NoData
             }
             Outcome::Failed(e) => {
-                eprintln!("globus: {e}");
+                tracing::warn!("{e}");
                 self.failures.record(key);
                 TileState::Failed
             }
@@ -455,7 +446,6 @@ impl TerrainLayer {
             .copied()
             .unwrap_or_else(|| self.estimate(key));
         node.state = state;
-        node.drawable = false;
         self.nodes.insert(key, node);
     }
 
@@ -496,14 +486,13 @@ impl TerrainLayer {
             }
         };
         let error_m = match parent {
-            Some(p) => p.tile.lod_error_m() * 0.5,
+            Some(p) => p.lod_error_m() * 0.5,
             None => TilingScheme::Geographic.rect(key).height() * self.ellipsoid.mean_radius(),
         };
         Node {
             bounds,
             error_m,
             state: TileState::Unloaded,
-            drawable: false,
         }
     }
 
@@ -547,7 +536,6 @@ impl TileOracle for TerrainLayer {
             None => self.estimate(key),
         };
         let state = match node.state {
-            TileState::Loaded if !node.drawable => TileState::Unloaded,
             TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
             // A failed tile is asked for again after its cool-down (a server may recover).
             TileState::Failed if self.failures.ready_again(key) => TileState::Unloaded,
@@ -654,12 +642,12 @@ mod tests {
                     TileRequest { key, priority: 1.0 }
                 })
                 .collect();
-            let stats = layer.update(&[], &wanted);
+            let stats = layer.update(&[], &[], &wanted);
             arrived += stats.arrived;
             peak = peak.max(stats.cached_bytes);
             arrived += layer.wait_for_tiles(Duration::from_millis(50)) as u32;
         }
-        let stats = layer.update(&[], &[]);
+        let stats = layer.update(&[], &[], &[]);
         peak = peak.max(stats.cached_bytes);
         // Far more arrived than fits, and the cache never held more than its budget after an
         // update (the two roots, always kept, fit in it).

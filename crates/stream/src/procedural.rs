@@ -19,15 +19,22 @@ pub struct ProceduralSource {
 impl ProceduralSource {
     /// The planet of `seed` on WGS84, with tiles down to `max_level`.
     pub fn new(seed: u64, max_level: u8) -> Self {
-        let planet = ProceduralPlanet::new(seed);
-        // Nothing is lower than the sea surface, so the ellipsoid itself hides what is behind it.
-        let occluder = planet.ellipsoid().grown(planet.min_surface_height_m());
+        Self::on(ProceduralPlanet::new(seed), max_level)
+    }
+
+    /// The planet of `seed` on any body, with tiles down to `max_level`.
+    pub fn with_ellipsoid(seed: u64, ellipsoid: Ellipsoid, max_level: u8) -> Self {
+        Self::on(ProceduralPlanet::with_ellipsoid(seed, ellipsoid), max_level)
+    }
+
+    fn on(planet: ProceduralPlanet, max_level: u8) -> Self {
+        let mesh_options = MeshOptions::default();
         Self {
+            occluder: occluder_of(&planet, &mesh_options),
+            name: format!("procedural planet (seed {})", planet.seed()),
             planet,
-            occluder,
             max_level: max_level.min(globus_tiling::TileKey::MAX_LEVEL),
-            name: format!("procedural planet (seed {seed})"),
-            mesh_options: MeshOptions::default(),
+            mesh_options,
         }
     }
 
@@ -49,11 +56,20 @@ impl ProceduralSource {
         }
     }
 
-    /// Cuts meshes with `options` instead of the default.
+    /// Cuts (and raises) meshes with `options` instead of the default.
     pub fn with_mesh_options(mut self, options: MeshOptions) -> Self {
         self.mesh_options = options;
+        self.occluder = occluder_of(&self.planet, &options);
         self
     }
+}
+
+/// The body below every drawn point: nothing is lower than the sea surface (raised by the
+/// exaggeration, as the meshes are), so the ellipsoid grown to it hides what is behind it.
+fn occluder_of(planet: &ProceduralPlanet, options: &MeshOptions) -> Ellipsoid {
+    planet
+        .ellipsoid()
+        .grown(planet.min_surface_height_m() * options.exaggeration)
 }
 
 impl TileSource for ProceduralSource {
@@ -89,9 +105,10 @@ impl TerrainSource for ProceduralSource {
     }
 
     fn height_range_m(&self) -> (f64, f64) {
+        let e = self.mesh_options.exaggeration;
         (
-            self.planet.min_surface_height_m(),
-            self.planet.max_surface_height_m(),
+            self.planet.min_surface_height_m() * e,
+            self.planet.max_surface_height_m() * e,
         )
     }
 

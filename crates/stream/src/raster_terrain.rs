@@ -157,7 +157,8 @@ impl<'a, T: Samples> Touched<'a, T> {
 
 impl RasterTerrainSource {
     /// Terrain on `ellipsoid` from `elevation` layers (bottom first), draped with `imagery`
-    /// layers (bottom first). `height_range_m` bounds the heights of tiles not loaded yet.
+    /// layers (bottom first). `height_range_m` bounds the true heights of tiles not loaded
+    /// yet (the drawn ones are raised by `mesh_options.exaggeration`).
     pub fn new(
         elevation: Vec<Arc<RasterPyramid<HeightImage>>>,
         imagery: Vec<Arc<RasterPyramid<Rgba>>>,
@@ -194,9 +195,13 @@ impl RasterTerrainSource {
             name: names.join(" + "),
             elevation,
             imagery,
-            occluder: ellipsoid.grown(height_range_m.0.min(0.0)),
+            // The drawn surface: heights raised by the exaggeration.
+            occluder: ellipsoid.grown(height_range_m.0.min(0.0) * mesh_options.exaggeration),
             ellipsoid,
-            height_range_m,
+            height_range_m: (
+                height_range_m.0 * mesh_options.exaggeration,
+                height_range_m.1 * mesh_options.exaggeration,
+            ),
             mesh_options,
             max_level,
         })

@@ -262,7 +262,7 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
                     .spawn(move || worker(&shared, &tx))
                     .map_err(|e| format!("cannot start a tile worker thread: {e}"))
             })
-            .filter_map(|r| r.inspect_err(|e| eprintln!("globus: {e}")).ok())
+            .filter_map(|r| r.inspect_err(|e| tracing::error!("{e}")).ok())
             .collect();
         Self {
             shared,

@@ -61,9 +61,11 @@ pub trait TileSource: Send + Sync + 'static {
 pub trait TerrainSource: TileSource<Tile = TerrainData> {
     /// The body the terrain is on.
     fn ellipsoid(&self) -> &Ellipsoid;
-    /// A body guaranteed to be below every terrain point (for horizon culling).
+    /// A body guaranteed to be below every drawn terrain point (for horizon culling; with an
+    /// elevation exaggeration, below the exaggerated surface).
     fn occluder(&self) -> &Ellipsoid;
-    /// The lowest and highest terrain heights, metres.
+    /// The lowest and highest heights of the drawn surface, metres (true heights times the
+    /// elevation exaggeration of the source's [`MeshOptions`]).
     fn height_range_m(&self) -> (f64, f64);
     /// The deepest level with data.
     fn max_level(&self) -> u8;
@@ -134,7 +136,7 @@ impl TerrainData {
     ) -> Self {
         let mesh = TileMesh::build(&tile, ellipsoid, occluder, options);
         tile.geometric_error_m = mesh.geometric_error_m;
-        let child_bounds = child_bounds(&tile, ellipsoid, occluder);
+        let child_bounds = child_bounds(&tile, ellipsoid, occluder, options.exaggeration);
         Self {
             tile,
             mesh,
@@ -148,24 +150,35 @@ impl TerrainData {
     pub fn byte_size(&self) -> usize {
         self.tile.byte_size() + self.mesh.byte_size() + std::mem::size_of::<Self>()
     }
+
+    /// The error LOD selection should use, in drawn metres: the tile's
+    /// [`TerrainTile::lod_error_m`] with its geometric part raised by the mesh's elevation
+    /// exaggeration (never lowered: an exaggeration below 1 flattens the heights but not the
+    /// curvature of the body the error also covers).
+    pub fn lod_error_m(&self) -> f64 {
+        let scale = self.mesh.exaggeration.max(1.0);
+        (self.tile.geometric_error_m * scale).max(self.tile.lod_error_m())
+    }
 }
 
 /// Conservative bounds of the four children from the parent's heights in each quadrant:
 /// children stay within the parent's geometric error of its mesh, and their skirts hang a
-/// few errors lower.
+/// few errors lower. Heights and errors are raised by `exaggeration`, as the meshes are.
 pub fn child_bounds(
     tile: &TerrainTile,
     ellipsoid: &Ellipsoid,
     occluder: &Ellipsoid,
+    exaggeration: f64,
 ) -> [TileBounds; 4] {
     let half = (MESH_SEGMENTS / 2) as i32;
+    let e = exaggeration;
     let Some(children) = tile.key.children() else {
         let b = TileBounds::from_rect(
             ellipsoid,
             occluder,
             &tile.rect,
-            tile.min_height_m,
-            tile.max_height_m,
+            tile.min_height_m * e,
+            tile.max_height_m * e,
         );
         return [b; 4];
     };
@@ -180,9 +193,15 @@ pub fn child_bounds(
                 hi = hi.max(h);
             }
         }
-        let margin = tile.geometric_error_m;
-        let skirt = 4.0 * tile.geometric_error_m + 0.02 * spacing_m;
+        let margin = tile.geometric_error_m * e.max(1.0);
+        let skirt = 4.0 * margin + 0.02 * spacing_m;
         let rect = TilingScheme::Geographic.rect(child);
-        TileBounds::from_rect(ellipsoid, occluder, &rect, lo - margin - skirt, hi + margin)
+        TileBounds::from_rect(
+            ellipsoid,
+            occluder,
+            &rect,
+            lo * e - margin - skirt,
+            hi * e + margin,
+        )
     })
 }

@@ -1156,7 +1156,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
     let deadline = Instant::now() + Duration::from_secs(20);
     while layer.get(tile).is_none() || layer.get(other).is_none() {
         assert!(Instant::now() < deadline, "terrain never arrived");
-        layer.update(&[], &wanted);
+        layer.update(&[], &[], &wanted);
         layer.wait_for_tiles(Duration::from_millis(50));
     }
     // The geometry came although the other tile's imagery stalls: it did not wait for it.
@@ -1170,7 +1170,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
     });
     while !matches!(layer.colour(tile), Some(TileColour::Ready(_))) {
         assert!(Instant::now() < deadline, "imagery never arrived");
-        layer.update(&drawn, &[]);
+        layer.update(&drawn, &[tile, other], &[]);
         layer.wait_for_tiles(Duration::from_millis(50));
     }
     let Some(TileColour::Ready(colour)) = layer.colour(tile) else {
@@ -1179,7 +1179,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
     let want = key_colour(TileKey::new(3, 8, 2));
     assert_eq!(quadrant_texel(colour), [want[0], want[1], want[2]]);
     let colour_bytes = colour.byte_size();
-    let stats = layer.update(&drawn, &[]);
+    let stats = layer.update(&drawn, &[tile, other], &[]);
     assert_eq!(layer.usage().map(|u| u.colours_loaded), Some(1));
     let data_bytes: usize = [tile, other]
         .iter()
@@ -1196,7 +1196,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
 
     // Nobody draws it any more: its colour load is cancelled, not left to finish.
     let before = layer.colour_scheduler_stats();
-    layer.update(&[], &[]);
+    layer.update(&[], &[], &[]);
     let after = layer.colour_scheduler_stats();
     assert_eq!(
         after.cancelled + after.cancelled_in_flight,
@@ -1209,7 +1209,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
             Instant::now() < deadline,
             "cancelled colour load still running"
         );
-        layer.update(&[], &[]);
+        layer.update(&[], &[], &[]);
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(matches!(layer.colour(other), Some(TileColour::Loading)));

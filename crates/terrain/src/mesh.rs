@@ -38,26 +38,32 @@ pub struct TerrainVertex {
     pub uv: u32,
 }
 
-/// How tile meshes are cut.
+/// How tile meshes are cut and raised.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeshOptions {
     /// Vertical error the mesh may add to the full grid, as a fraction of the tile's
     /// geometric error; 0 keeps every grid sample.
     pub error_fraction: f64,
+    /// Elevation exaggeration (Kaiser 2018, 3.4): every height is drawn this many times its
+    /// value above the ellipsoid, and skirts, bounds and errors scale with it, so culling and
+    /// LOD selection see the surface that is drawn. 1 draws true heights.
+    pub exaggeration: f64,
 }
 
 impl Default for MeshOptions {
     fn default() -> Self {
         Self {
             error_fraction: 0.25,
+            exaggeration: 1.0,
         }
     }
 }
 
 impl MeshOptions {
-    /// Every grid sample kept (the regular grid).
+    /// Every grid sample kept (the regular grid), true heights.
     pub const FULL_GRID: Self = Self {
         error_fraction: 0.0,
+        exaggeration: 1.0,
     };
 }
 
@@ -80,8 +86,11 @@ pub struct TileMesh {
     pub skirt_depth_m: f64,
     /// Largest vertical distance, metres, this mesh adds to the full grid (measured).
     pub cut_error_m: f64,
-    /// The tile's geometric error with the cut's added: what LOD selection should use.
+    /// The tile's geometric error with the cut's added, in true (unexaggerated) metres.
     pub geometric_error_m: f64,
+    /// The elevation exaggeration the vertices were raised with
+    /// ([`MeshOptions::exaggeration`]): drawn vertical distances are this many times true ones.
+    pub exaggeration: f64,
 }
 
 /// Skirts reach this many times the tile's geometric error below its edges: a neighbour two
@@ -106,14 +115,17 @@ impl TileMesh {
             let t = f64::from(j) / n;
             rect.north * (1.0 - t) + rect.south * t
         };
+        let exaggeration = options.exaggeration;
         let position = |i: i32, j: i32, dh: f64| {
-            let h = f64::from(tile.height_at(i, j)) + dh;
+            let h = f64::from(tile.height_at(i, j)) * exaggeration + dh;
             ellipsoid.cartographic_to_ecef(Cartographic::new(lon_at(i), lat_at(j), h))
         };
         let spacing_m = rect.height() / n * ellipsoid.mean_radius();
         let (adaptive, cut_error_m) = cut(tile, spacing_m, ellipsoid.mean_radius(), options);
         let geometric_error_m = tile.geometric_error_m + cut_error_m;
-        let skirt_depth_m = SKIRT_ERROR_FACTOR * geometric_error_m + 0.02 * spacing_m;
+        // Drawn metres: cracks between neighbours are differences of exaggerated heights.
+        let skirt_depth_m =
+            SKIRT_ERROR_FACTOR * geometric_error_m * exaggeration + 0.02 * spacing_m;
 
         let edges = adaptive.edge_vertices();
         let surface = adaptive.vertices.len();
@@ -168,6 +180,7 @@ impl TileMesh {
             skirt_depth_m,
             cut_error_m,
             geometric_error_m,
+            exaggeration,
         }
     }
 

@@ -4,15 +4,12 @@
 //! (no hole inside the silhouette), the continents where they are, and failed tiles must
 //! leave their ancestors in place.
 
-mod common;
-
 use std::path::Path;
 use std::time::Duration;
 
-use globus_app::engine::{CameraSpec, GlobeOptions};
-use globus_app::offscreen::{Offscreen, holes_inside, save_png};
-use globus_geo::{Cartographic, Ellipsoid};
-use globus_stream::open::SourceSpec;
+use globus_engine::{
+    CameraSpec, Cartographic, Ellipsoid, GlobeBuilder, Headless, SourceSpec, holes_inside, save_png,
+};
 use globus_test_support::http::{Fault, FaultServer};
 use globus_test_support::shared_data;
 use globus_tiler::{ElevationEncoding, ImageFormat, JobKind, TileJob};
@@ -69,13 +66,12 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
         Some(1),
     );
     server.add_fault("/topo/1/2/0.png", Fault::NotAnImage, None);
-    let options = GlobeOptions {
-        terrain: vec![SourceSpec::parse(&server.url("/topo")).expect("spec")],
-        imagery: vec![SourceSpec::parse(&server.url("/bmng")).expect("spec")],
-        ..GlobeOptions::default()
-    };
+    let mut builder = GlobeBuilder::new();
+    builder
+        .terrain(SourceSpec::parse(&server.url("/topo")).expect("spec"))
+        .imagery(SourceSpec::parse(&server.url("/bmng")).expect("spec"));
     let (w, h) = (640, 360);
-    let mut off = Offscreen::new(&options, w, h).expect("a GPU or lavapipe, and the sources");
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the sources");
     let cam = CameraSpec {
         lon_deg: 10.0,
         lat_deg: 30.0,
@@ -84,9 +80,9 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
         pitch_deg: -90.0,
         above_ground: false,
     };
-    let view = cam.view(&off.globe, 60.0, w, h);
+    let view = cam.view(off.globe(), 60.0, w, h);
     let frame = off
-        .render_complete(&view, Duration::from_secs(120))
+        .render_complete(&view, Duration::from_secs(120), &mut [])
         .expect("render");
     let dir = globus_test_support::output_dir("real_earth");
     save_png(&frame.image, &dir.join("earth_over_http.png")).expect("save");
@@ -128,7 +124,7 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     // once: a ring read and the tile's own load share one request and its outcome), and its
     // ancestor filled its place in the complete picture above. Only the broken tile failed,
     // so the others' data arrived.
-    let stats = off.globe.layer().scheduler_stats();
+    let stats = off.globe().layer().scheduler_stats();
     assert!(stats.retries >= 1, "{stats:?}");
     assert_eq!(stats.failed, 1, "{stats:?}");
     assert!(
@@ -147,11 +143,9 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
 
 #[test]
 fn sources_that_cannot_be_opened_fail_with_their_name() {
-    let options = GlobeOptions {
-        terrain: vec![SourceSpec::parse("/nonexistent/globus/dem").expect("spec")],
-        ..GlobeOptions::default()
-    };
-    let err = match Offscreen::new(&options, 64, 64) {
+    let mut builder = GlobeBuilder::new();
+    builder.terrain(SourceSpec::parse("/nonexistent/globus/dem").expect("spec"));
+    let err = match Headless::new(&builder, 64, 64) {
         Ok(_) => panic!("opened a missing source"),
         Err(e) => format!("{e:#}"),
     };
@@ -159,126 +153,6 @@ fn sources_that_cannot_be_opened_fail_with_their_name() {
         err.contains("/nonexistent/globus/dem") && err.contains("metadata.json"),
         "{err}"
     );
-}
-
-#[test]
-fn quantized_mesh_terrain_matches_the_pyramid_it_was_meshed_from() {
-    use globus_stream::TileSource;
-    use globus_stream::decode::DecodeLimits;
-    use globus_stream::fetch::{Cancel, HttpClient, HttpOptions};
-    use globus_stream::open::{
-        DEFAULT_LAYER_CACHE_BYTES, LayerKind, elevation_pyramid, open_layer,
-    };
-    use std::sync::Arc;
-
-    let root = common::scratch("real_earth", "quantized_mesh");
-    let rgb = root.join("srtm");
-    tile(
-        JobKind::Dem {
-            encoding: ElevationEncoding::Terrarium,
-            height_scale: None,
-        },
-        "N57E011.hgt",
-        &rgb,
-        Some(7),
-    );
-    // Every level-7 tile meshed with a 1 m bound by `globus mesh`, written as Cesium lays
-    // quantized-mesh out: TMS rows (geographic level 7 has 128 rows).
-    let qm = root.join("qm");
-    let mut meshed = 0;
-    for x in std::fs::read_dir(rgb.join("7")).expect("level 7").flatten() {
-        let xs = x.file_name().to_string_lossy().to_string();
-        for y in std::fs::read_dir(x.path()).expect("ys").flatten() {
-            let ys = y
-                .file_name()
-                .to_string_lossy()
-                .trim_end_matches(".png")
-                .to_string();
-            let row: u32 = ys.parse().expect("row");
-            let out = qm.join(format!("7/{xs}/{}.terrain", 127 - row));
-            std::fs::create_dir_all(out.parent().expect("dir")).expect("mkdir");
-            let o = common::globus(&[
-                "mesh",
-                "--in",
-                common::s(&y.path()),
-                "--encoding",
-                "terrarium",
-                "--max-error",
-                "1",
-                "--tile",
-                &format!("7/{xs}/{ys}"),
-                "--scheme",
-                "geographic",
-                "--out",
-                common::s(&out),
-            ]);
-            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            meshed += 1;
-        }
-    }
-    assert!(meshed >= 2);
-    std::fs::write(
-        qm.join("metadata.json"),
-        r#"{"scheme": "geographic", "minzoom": 7, "maxzoom": 7, "bounds": [11, 57, 12, 58],
-            "format": "terrain", "encoding": "quantized-mesh", "layout": "tms"}"#,
-    )
-    .expect("metadata");
-
-    let server = FaultServer::serve_dir(&root);
-    let http = Arc::new(HttpClient::new(HttpOptions::default()));
-    let source = |url: String| {
-        let layer = open_layer(
-            &SourceSpec::parse(&url).expect("spec"),
-            LayerKind::Elevation,
-            &http,
-            None,
-        )
-        .unwrap_or_else(|e| panic!("{url}: {e}"));
-        let pyramid = elevation_pyramid(layer, DecodeLimits::default(), DEFAULT_LAYER_CACHE_BYTES)
-            .expect("pyramid");
-        globus_stream::RasterTerrainSource::new(
-            vec![pyramid],
-            Vec::new(),
-            Ellipsoid::WGS84,
-            (-100.0, 500.0),
-            globus_terrain::MeshOptions::default(),
-        )
-        .expect("source")
-    };
-    let from_qm = source(server.url("/qm"));
-    let from_rgb = source(server.url("/srtm"));
-    let cancel = Cancel::new();
-    // Engine tiles at levels 7 and 8 over Gothenburg: the mesh vertices' heights agree with
-    // the pyramid the meshes were cut from within the 1 m bound of the meshes (measured:
-    // 0.01 m RMS, 0.11 m at worst; with rows read from the north instead, the tiles are not
-    // found at all).
-    let (mut worst, mut sum, mut n) = (0f64, 0f64, 0f64);
-    for level in [7u8, 8] {
-        let key = TilingScheme::Geographic
-            .tile_at(11.95f64.to_radians(), 57.7f64.to_radians(), level)
-            .expect("key");
-        let a = from_qm.load(key, &cancel).expect("qm").expect("qm data");
-        let b = from_rgb.load(key, &cancel).expect("rgb").expect("rgb data");
-        for j in 0..=32 {
-            for i in 0..=32 {
-                let d = f64::from(a.tile.height_at(i, j) - b.tile.height_at(i, j)).abs();
-                worst = worst.max(d);
-                sum += d * d;
-                n += 1.0;
-            }
-        }
-        assert!(
-            b.tile.max_height_m - b.tile.min_height_m > 20.0,
-            "relief at level {level}"
-        );
-    }
-    let rms = (sum / n).sqrt();
-    assert!(
-        rms < 0.25 && worst <= 1.0,
-        "rms {rms:.2} m, worst {worst:.2} m"
-    );
-    assert!(server.count("/qm/7/") >= 1);
-    let _ = std::fs::remove_dir_all(&root);
 }
 
 /// A terrain source whose separate colour loads wait until the gate opens (or they are
@@ -347,9 +221,9 @@ impl globus_stream::TerrainSource for GatedImagery {
 /// Mean absolute difference of the colour channels of `a` and `b` (read `shift` pixels to
 /// the right) averaged over 8 x 8 blocks, over blocks that are terrain in both: where the
 /// pictures show the same things, whatever their sharpness.
-fn block_difference(a: &globus_render::RgbaImage, b: &globus_render::RgbaImage, shift: u32) -> f64 {
+fn block_difference(a: &globus_engine::RgbaImage, b: &globus_engine::RgbaImage, shift: u32) -> f64 {
     const B: u32 = 8;
-    let mean = |img: &globus_render::RgbaImage, x0: u32, y0: u32| {
+    let mean = |img: &globus_engine::RgbaImage, x0: u32, y0: u32| {
         let mut sum = [0f64; 3];
         for y in y0..y0 + B {
             for x in x0..x0 + B {
@@ -380,7 +254,8 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
     use std::sync::Arc;
     use std::sync::atomic::Ordering;
 
-    let root = common::scratch("real_earth", "imagery_apart");
+    let root = globus_test_support::output_dir("real_earth").join("imagery_apart");
+    let _ = std::fs::remove_dir_all(&root);
     tile_topography(&root.join("topo"), 2);
     // Imagery of level 0 only, in 128-pixel tiles (the Blue Marble shrunk to 256 x 128): the
     // roots' 128-texel colours hold its pixels exactly, and a deeper tile's own colour samples
@@ -403,17 +278,18 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
         "bounds": [-180.0, -90.0, 180.0, 90.0],
     });
     std::fs::write(root.join("bmng/metadata.json"), meta.to_string()).expect("metadata");
-    let options = GlobeOptions {
-        terrain: vec![SourceSpec::parse(common::s(&root.join("topo"))).expect("spec")],
-        imagery: vec![SourceSpec::parse(common::s(&root.join("bmng"))).expect("spec")],
-        ..GlobeOptions::default()
-    };
+    let path = |p: &Path| p.to_str().expect("utf-8 path").to_owned();
+    let mut builder = GlobeBuilder::new();
+    builder
+        .terrain(SourceSpec::parse(&path(&root.join("topo"))).expect("spec"))
+        .imagery(SourceSpec::parse(&path(&root.join("bmng"))).expect("spec"));
     let gated = Arc::new(GatedImagery {
-        inner: globus_app::engine::terrain_source(&options).expect("sources"),
+        inner: builder.open_source().expect("sources"),
         open: false.into(),
     });
+    builder.source(gated.clone());
     let (w, h) = (480, 270);
-    let mut off = Offscreen::with_source(&options, gated.clone(), w, h).expect("a GPU or lavapipe");
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
     let cam = CameraSpec {
         lon_deg: 12.0,
         lat_deg: 42.0,
@@ -422,22 +298,22 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
         pitch_deg: -90.0,
         above_ground: false,
     };
-    let view = cam.view(&off.globe, 60.0, w, h);
+    let view = cam.view(off.globe(), 60.0, w, h);
 
     // Flat light and no air: the pictures are the imagery itself.
-    off.globe.lighting = Some(globus_render::Lighting {
+    off.globe_mut().set_lighting(Some(globus_engine::Lighting {
         ambient: 1.0,
         atmosphere_m: 1.0,
         inscatter_gain: 0.0,
         exposure: 1.0,
-        ..globus_render::Lighting::sun_over(0.0, 0.0)
-    });
+        ..globus_engine::Lighting::sun_over(0.0, 0.0)
+    }));
     // Every tile's geometry, none of their imagery (except the roots', which comes with them).
-    off.globe.relax_detail = false;
-    off.globe.renderer.pool.set_uploads_per_frame(u32::MAX);
+    off.globe_mut().set_relax_detail(false);
+    off.globe_mut().set_uploads_per_frame(u32::MAX);
     let deadline = std::time::Instant::now() + Duration::from_secs(60);
     let borrowed = loop {
-        let report = off.globe.frame(&off.ctx.device, &off.ctx.queue, &view);
+        let report = off.update(&view);
         if report.wanted == 0 {
             break report;
         }
@@ -445,11 +321,11 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
             std::time::Instant::now() < deadline,
             "terrain never completed"
         );
-        off.globe
+        off.globe_mut()
             .layer_mut()
             .wait_for_tiles(Duration::from_millis(50));
     };
-    let before = off.draw_and_read().expect("render");
+    let before = off.draw_and_read(&mut []).expect("render");
     let dir = globus_test_support::output_dir("real_earth");
     save_png(&before, &dir.join("imagery_loading.png")).expect("save");
     let d = borrowed.draw;
@@ -466,7 +342,7 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
     // The imagery arrives: every tile shows its own.
     gated.open.store(true, Ordering::Release);
     let frame = off
-        .render_complete(&view, Duration::from_secs(60))
+        .render_complete(&view, Duration::from_secs(60), &mut [])
         .expect("render");
     save_png(&frame.image, &dir.join("imagery_loaded.png")).expect("save");
     assert!(frame.complete);

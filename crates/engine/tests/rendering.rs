@@ -4,10 +4,10 @@
 
 use std::time::Duration;
 
-use globus_app::engine::{CameraSpec, GlobeOptions};
-use globus_app::offscreen::{Offscreen, RenderedFrame, holes_inside, save_png};
-use globus_geo::{Ellipsoid, View};
-use globus_render::RgbaImage;
+use globus_engine::{
+    CameraSpec, Ellipsoid, GlobeBuilder, Headless, RenderedFrame, RgbaImage, View, holes_inside,
+    save_png,
+};
 
 const TIMEOUT: Duration = Duration::from_secs(240);
 
@@ -30,10 +30,11 @@ fn camera(
 }
 
 fn render(name: &str, cam: CameraSpec, width: u32, height: u32) -> (RenderedFrame, View) {
-    let mut off =
-        Offscreen::new(&GlobeOptions::default(), width, height).expect("a GPU or lavapipe");
-    let view = cam.view(&off.globe, 60.0, width, height);
-    let frame = off.render_complete(&view, TIMEOUT).expect("render");
+    let mut off = Headless::new(&GlobeBuilder::new(), width, height).expect("a GPU or lavapipe");
+    let view = cam.view(off.globe(), 60.0, width, height);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
     let dir = globus_test_support::output_dir("rendering");
     save_png(&frame.image, &dir.join(format!("{name}.png"))).expect("save");
     assert!(
@@ -191,14 +192,20 @@ fn moving_one_millimetre_at_one_metre_altitude_does_not_jitter() {
     let (w, h) = (480, 270);
     // Near the Alps and near the north pole, where f32 coordinates would be worst.
     for (name, lon, lat) in [("jitter_alps", 7.6, 46.0), ("jitter_pole", 179.9, 89.9)] {
-        let mut off = Offscreen::new(&GlobeOptions::default(), w, h).expect("a GPU or lavapipe");
+        let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
         let cam = camera(lon, lat, 1.0, 30.0, -25.0, true);
-        let view = cam.view(&off.globe, 60.0, w, h);
-        let a = off.render_complete(&view, TIMEOUT).expect("render");
+        let view = cam.view(off.globe(), 60.0, w, h);
+        let a = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
         let mut moved = view;
         moved.position += view.right() * 0.001;
-        let b = off.render_complete(&moved, TIMEOUT).expect("render");
-        let again = off.render_complete(&view, TIMEOUT).expect("render");
+        let b = off
+            .render_complete(&moved, TIMEOUT, &mut [])
+            .expect("render");
+        let again = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
         let dir = globus_test_support::output_dir("rendering");
         save_png(&a.image, &dir.join(format!("{name}_a.png"))).expect("save");
         save_png(&b.image, &dir.join(format!("{name}_b.png"))).expect("save");
@@ -231,7 +238,7 @@ fn moving_one_millimetre_at_one_metre_altitude_does_not_jitter() {
         for step in 1..=25 {
             let mut v = view;
             v.position += view.right() * (0.04 * f64::from(step));
-            let f = off.render_complete(&v, TIMEOUT).expect("render");
+            let f = off.render_complete(&v, TIMEOUT, &mut []).expect("render");
             let img = to(&f);
             diffs.push(previous.mean_abs_diff(&img));
             previous = img;
@@ -256,15 +263,15 @@ fn moving_one_millimetre_at_one_metre_altitude_does_not_jitter() {
 /// deeper, complete and without holes.
 #[test]
 fn refined_terrain_below_the_data_renders_without_holes() {
-    let options = GlobeOptions {
-        refine_below: Some(11),
-        ..GlobeOptions::default()
-    };
+    let mut builder = GlobeBuilder::new();
+    builder.refine_below(Some(11));
     let (w, h) = (480, 270);
-    let mut off = Offscreen::new(&options, w, h).expect("a GPU or lavapipe");
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
     let cam = camera(7.6, 46.0, 30.0, 200.0, -10.0, true);
-    let view = cam.view(&off.globe, 60.0, w, h);
-    let frame = off.render_complete(&view, TIMEOUT).expect("render");
+    let view = cam.view(off.globe(), 60.0, w, h);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
     let dir = globus_test_support::output_dir("rendering");
     save_png(&frame.image, &dir.join("refined_ground.png")).expect("save");
     assert!(frame.complete, "refined tiles still loading");

@@ -3,9 +3,8 @@
 
 use std::time::Duration;
 
-use globus_app::engine::{CameraSpec, GlobeOptions};
-use globus_app::memory::resident_bytes;
-use globus_app::offscreen::Offscreen;
+use globus_engine::memory::resident_bytes;
+use globus_engine::{CameraSpec, GlobeBuilder, Headless};
 
 const MIB: u64 = 1 << 20;
 
@@ -14,24 +13,23 @@ fn a_memory_budget_sizes_every_cache_and_the_flight_stays_inside_it() {
     // A procedural planet whose data ends at level 7 (refinement bases are a source cache),
     // with 320 MiB beyond what the process holds now.
     let now = resident_bytes().unwrap_or(160 * MIB);
-    let options = GlobeOptions {
-        refine_below: Some(7),
-        max_level: 18,
-        memory_bytes: Some(now + 320 * MIB),
-        workers: 2,
-        ..GlobeOptions::default()
-    };
+    let mut builder = GlobeBuilder::new();
+    builder
+        .refine_below(Some(7))
+        .max_level(18)
+        .memory_budget(Some(now + 320 * MIB))
+        .workers(2);
     let (w, h) = (480, 270);
-    let mut off = Offscreen::new(&options, w, h).expect("a GPU or lavapipe");
-    let plan = off.globe.memory_use().plan.expect("a plan");
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+    let plan = off.globe().memory_use().plan.expect("a plan");
     assert_eq!(
         plan.baseline + plan.headroom + plan.sources + plan.gpu_pool + plan.tile_cache,
         plan.total
     );
-    assert_eq!(off.globe.layer().cache_bytes().1 as u64, plan.tile_cache);
-    assert_eq!(off.globe.memory_use().gpu_pool, plan.gpu_pool);
+    assert_eq!(off.globe().layer().cache_bytes().1 as u64, plan.tile_cache);
+    assert_eq!(off.globe().memory_use().gpu_pool, plan.gpu_pool);
     assert_eq!(
-        u64::from(off.globe.renderer.pool.stats().capacity),
+        u64::from(off.globe().pool_stats().capacity),
         u64::from(plan.gpu_slots)
     );
 
@@ -48,11 +46,11 @@ fn a_memory_budget_sizes_every_cache_and_the_flight_stays_inside_it() {
             pitch_deg: -30.0,
             above_ground: true,
         };
-        let view = cam.view(&off.globe, 60.0, w, h);
+        let view = cam.view(off.globe(), 60.0, w, h);
         let frame = off
-            .render_complete(&view, Duration::from_secs(120))
+            .render_complete(&view, Duration::from_secs(120), &mut [])
             .expect("render");
-        let used = off.globe.memory_use();
+        let used = off.globe().memory_use();
         peak_cache = peak_cache.max(used.tile_cache);
         assert!(
             used.sources <= plan.sources,
@@ -78,11 +76,9 @@ fn a_memory_budget_sizes_every_cache_and_the_flight_stays_inside_it() {
 
 #[test]
 fn a_budget_smaller_than_the_process_is_refused_with_the_least_that_works() {
-    let options = GlobeOptions {
-        memory_bytes: Some(64 * MIB),
-        ..GlobeOptions::default()
-    };
-    let e = match Offscreen::new(&options, 64, 64) {
+    let mut builder = GlobeBuilder::new();
+    builder.memory_budget(Some(64 * MIB));
+    let e = match Headless::new(&builder, 64, 64) {
         Ok(_) => panic!("a 64 MiB budget was accepted"),
         Err(e) => e.to_string(),
     };

@@ -8,6 +8,8 @@
 //! When the parts fill up, the engine lowers detail (raises the error bound) instead of
 //! growing: the tile cache and the pools never grow past their share.
 
+use crate::EngineError;
+
 /// Default total budget of `globus view|render|bench`, MiB, when the config sizes no cache.
 pub const DEFAULT_MEMORY_MB: u64 = 1024;
 
@@ -88,7 +90,7 @@ impl MemoryPlan {
         workers: usize,
         sources_cached: bool,
         gpu_bytes: impl Fn(u32) -> u64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, EngineError> {
         let baseline = baseline.unwrap_or(BASELINE_ESTIMATE);
         let headroom = HEADROOM_FIXED
             + HEADROOM_PER_WORKER * workers as u64
@@ -111,13 +113,12 @@ impl MemoryPlan {
                 };
             let fixed_part = baseline + HEADROOM_FIXED + HEADROOM_PER_WORKER * workers as u64;
             let need = ((fixed_part + least) as f64 / (1.0 - share)).ceil() as u64;
-            return Err(format!(
-                "a memory budget of {} MiB is too small: this process already holds {} MiB \
-                 before any tile, and with {workers} loader threads it needs at least {} MiB",
-                total >> 20,
-                baseline >> 20,
-                need.div_ceil(1 << 20)
-            ));
+            return Err(EngineError::MemoryBudget {
+                total_mib: total >> 20,
+                baseline_mib: baseline >> 20,
+                workers,
+                least_mib: need.div_ceil(1 << 20),
+            });
         }
         let per_slot = gpu_bytes(MAX_GPU_SLOTS) as f64 / f64::from(MAX_GPU_SLOTS);
         let gpu_slots = ((left as f64 * GPU_SHARE) / per_slot.max(1.0)) as u32;
@@ -185,7 +186,9 @@ mod tests {
     #[test]
     fn too_small_a_budget_names_the_least_that_works() {
         let slot = |n: u32| u64::from(n) * 131 * 1024;
-        let e = MemoryPlan::new(200 * MIB, Some(120 * MIB), 16, true, slot).unwrap_err();
+        let e = MemoryPlan::new(200 * MIB, Some(120 * MIB), 16, true, slot)
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("200 MiB is too small") && e.contains("120 MiB"),
             "{e}"

@@ -1,0 +1,378 @@
+//! The command line: every subcommand's arguments, and their translation into engine
+//! options. Every bad argument ends with one line naming it.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use globus_engine::{CameraSpec, GlobeBuilder, SourceSpec};
+
+use crate::config::{self, Config};
+use crate::geo_cmd;
+use crate::mesh_cmd::MeshArgs;
+use crate::tile_cmd::{MergeArgs, TileArgs};
+
+/// Default total memory budget of `globus view|render|bench`, MiB, when the config file
+/// sizes no cache itself.
+pub const DEFAULT_MEMORY_MB: u64 = 1024;
+
+#[derive(Parser)]
+#[command(
+    name = "globus",
+    version,
+    about = "Globus: a planetary terrain and virtual-globe engine"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Open a window on the planet (left drag pans, wheel zooms, right drag looks around,
+    /// middle drag or Ctrl + left drag orbits the point under the cursor).
+    View(ViewArgs),
+    /// Render one complete frame offscreen to a PNG.
+    Render(RenderArgs),
+    /// Replay a camera path offscreen and print timing statistics as JSON.
+    Bench(BenchArgs),
+    /// Build elevation or imagery tile pyramids from rasters.
+    Tile {
+        #[command(subcommand)]
+        command: TileCommand,
+    },
+    /// Build one tile's adaptive mesh from an elevation PNG, or describe a quantized-mesh file.
+    Mesh(MeshArgs),
+    /// Geodesy and tile naming conversions.
+    Geo {
+        #[command(subcommand)]
+        command: GeoCommand,
+    },
+}
+
+#[derive(Args, Clone)]
+pub struct GlobeArgs {
+    /// Screen-space error bound in pixels (default 2).
+    #[arg(long)]
+    pub sse: Option<f64>,
+    /// An elevation layer: a `globus tile` directory, .mbtiles or .pmtiles file, a served
+    /// directory URL, or an http(s) URL template with options after '#'
+    /// (e.g. 'https://host/{z}/{x}/{y}.png#encoding=terrarium&maxzoom=15'). Repeatable;
+    /// later layers lie on top.
+    #[arg(long = "terrain")]
+    pub terrain: Vec<String>,
+    /// An imagery layer (same forms; WMS with '#wms_layers=NAME'). Repeatable; later layers
+    /// are drawn over earlier ones.
+    #[arg(long = "imagery")]
+    pub imagery: Vec<String>,
+    /// A TOML file naming sources, budgets, the error bound and HTTP settings.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Keep tiles from services in this folder (2 GiB at most), so later sessions work offline.
+    #[arg(long = "disk-cache")]
+    pub disk_cache: Option<PathBuf>,
+    /// Seed of the procedural planet (the default, 24, raises a mountain range where the
+    /// Alps are on Earth).
+    #[arg(long, default_value_t = globus_engine::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Vertical field of view in degrees.
+    #[arg(long = "fov-deg", default_value_t = 60.0)]
+    pub fov_deg: f64,
+    /// Vertical error a tile's adaptive mesh may add, as a fraction of the tile's geometric
+    /// error (0 draws every sample of the tile grid).
+    #[arg(long = "mesh-error", default_value_t = globus_terrain::MeshOptions::default().error_fraction)]
+    pub mesh_error: f64,
+    /// Elevation exaggeration: draw heights this many times their value (terrain, bounds
+    /// and culling follow; 1 is true heights).
+    #[arg(long)]
+    pub exaggeration: Option<f64>,
+    /// Treat the planet's data as ending at this level and invent every deeper tile by
+    /// procedural refinement (a stand-in for real data that ends, like 90 m SRTM).
+    #[arg(long = "refine-below")]
+    pub refine_below: Option<u8>,
+    /// While the camera moves, do not request wanted tiles that will be out of view this many
+    /// frames ahead at its current velocity (a drawn ancestor covers them meanwhile); 0
+    /// requests every wanted tile (default 3).
+    #[arg(long = "request-lookahead")]
+    pub request_lookahead: Option<f64>,
+    /// Memory budget in MiB for everything the globe holds (process, tile caches, decoded
+    /// source tiles, GPU pools); the caches are sized from it (default 1024, unless the
+    /// config file sizes them with cache_mb or gpu_tiles).
+    #[arg(long = "memory-mb")]
+    pub memory_mb: Option<u64>,
+}
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG.
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        default_value = "10,30,15000000,0,-90"
+    )]
+    pub camera: String,
+    /// ALT_M is above the ground under the camera, not above the ellipsoid.
+    #[arg(long)]
+    pub above_ground: bool,
+    /// Window size, WxH.
+    #[arg(long, default_value = "1280x720")]
+    pub size: String,
+    #[command(flatten)]
+    pub globe: GlobeArgs,
+    /// Close the window after this many seconds (for automated checks).
+    #[arg(long)]
+    pub exit_after: Option<f64>,
+}
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// Camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (heading clockwise from north, pitch 0 at
+    /// the horizon and -90 straight down, ALT_M above the ellipsoid).
+    #[arg(long, allow_hyphen_values = true)]
+    pub camera: String,
+    /// ALT_M is above the ground under the camera.
+    #[arg(long)]
+    pub above_ground: bool,
+    /// Image size, WxH.
+    #[arg(long)]
+    pub size: String,
+    /// Output PNG.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write statistics as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    #[command(flatten)]
+    pub globe: GlobeArgs,
+    /// Give up waiting for tiles after this many seconds.
+    #[arg(long, default_value_t = 300.0)]
+    pub timeout_s: f64,
+}
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Camera path JSON (see paths/alps-dive.json).
+    #[arg(long, conflicts_with_all = ["from", "to", "soak"], required_unless_present_any = ["from", "soak"])]
+    pub path: Option<PathBuf>,
+    /// Soak test: fly between random views for this many seconds in real time, printing one
+    /// JSON line per second (resident memory, cache bytes, GPU tiles, loads, failures).
+    #[arg(long, conflicts_with_all = ["from", "to"])]
+    pub soak: Option<f64>,
+    /// Jump benchmark: load everything at this camera (LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG),
+    /// then jump to --to and time how the new view fills in.
+    #[arg(long, allow_hyphen_values = true, requires = "to")]
+    pub from: Option<String>,
+    /// Where the jump goes.
+    #[arg(long, allow_hyphen_values = true, requires = "from")]
+    pub to: Option<String>,
+    /// Frame size, WxH.
+    #[arg(long, default_value = "1920x1080")]
+    pub size: String,
+    /// Frames per second of path time.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Play the path in real time (a frame waits for its moment, as in a viewer), instead of
+    /// as fast as frames render, starting once the first view is loaded; for streaming
+    /// figures, where loads race the camera.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Jump benchmark only: prepare every frame (selection, loads, uploads) but rasterise
+    /// only the first, so software rendering does not take the cores the loaders need.
+    #[arg(long = "no-draw")]
+    pub no_draw: bool,
+    #[command(flatten)]
+    pub globe: GlobeArgs,
+}
+
+#[derive(Subcommand)]
+pub enum TileCommand {
+    /// Elevation: SRTM .hgt, GeoTIFF DEMs or greyscale images to RGB-encoded PNG tiles.
+    Dem(TileArgs),
+    /// Imagery: a GeoTIFF or a JPEG/PNG world image to JPEG, PNG or WebP tiles.
+    Imagery(TileArgs),
+    /// Split a job into shards of roughly equal work and print the plan as JSON.
+    Plan {
+        /// Number of shards.
+        #[arg(long)]
+        shards: u32,
+        #[command(subcommand)]
+        job: TileJobCommand,
+    },
+    /// Join shard outputs into one pyramid.
+    Merge(MergeArgs),
+}
+
+#[derive(Subcommand)]
+pub enum TileJobCommand {
+    /// An elevation job (same options as `globus tile dem`).
+    Dem(TileArgs),
+    /// An imagery job (same options as `globus tile imagery`).
+    Imagery(TileArgs),
+}
+
+#[derive(Subcommand)]
+pub enum GeoCommand {
+    /// Longitude, latitude (degrees) and height (m) to ECEF metres.
+    #[command(allow_negative_numbers = true)]
+    Ecef { lon: f64, lat: f64, height: f64 },
+    /// ECEF metres to longitude, latitude and height.
+    #[command(allow_negative_numbers = true)]
+    Cartographic { x: f64, y: f64, z: f64 },
+    /// The tile containing a point, with its names and bounds.
+    Tile {
+        /// geographic or webmercator.
+        #[arg(long)]
+        scheme: String,
+        /// Longitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lon: f64,
+        /// Latitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lat: f64,
+        /// Zoom level.
+        #[arg(long)]
+        level: u8,
+    },
+}
+
+/// The globe the arguments (and their config file) describe. Checks every value the
+/// command line adds; the engine checks the rest when the globe is built.
+pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
+    let mut builder = GlobeBuilder::new();
+    let mut caches_sized = false;
+    if let Some(path) = &a.config {
+        let config = Config::load(path)?;
+        config.apply(&mut builder);
+        caches_sized = config.sizes_caches();
+    }
+    match a.memory_mb {
+        Some(0) => bail!("--memory-mb must be above 0"),
+        Some(_) if caches_sized => bail!(
+            "--memory-mb sizes the tile cache and the GPU pools itself, but the config file \
+             sizes them too (cache_mb or gpu_tiles)"
+        ),
+        Some(mb) => {
+            builder.memory_budget(Some(mb << 20));
+        }
+        None if !caches_sized && builder.memory_budget_bytes().is_none() => {
+            builder.memory_budget(Some(DEFAULT_MEMORY_MB << 20));
+        }
+        None => {}
+    }
+    if let Some(sse) = a.sse {
+        builder.max_sse_px(sse);
+    }
+    let sse = builder.error_bound_px();
+    if !(sse > 0.0 && sse <= 1000.0) {
+        bail!("--sse {sse} must be a pixel error above 0 and at most 1000");
+    }
+    if !(a.fov_deg > 0.5 && a.fov_deg < 170.0) {
+        bail!(
+            "--fov-deg {} must be between 0.5 and 170 degrees",
+            a.fov_deg
+        );
+    }
+    if !(0.0..=4.0).contains(&a.mesh_error) {
+        bail!(
+            "--mesh-error {} must be a fraction of the tile error from 0 to 4",
+            a.mesh_error
+        );
+    }
+    builder.mesh_error(a.mesh_error);
+    if let Some(e) = a.exaggeration {
+        if !(0.0..=1000.0).contains(&e) {
+            bail!("--exaggeration {e} must be a factor from 0 to 1000");
+        }
+        builder.exaggeration(e);
+    }
+    for t in &a.terrain {
+        builder.terrain(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--terrain: {e}"))?);
+    }
+    for t in &a.imagery {
+        builder.imagery(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?);
+    }
+    if let Some(dir) = &a.disk_cache {
+        builder.disk_cache(Some(config::disk_cache_options(
+            dir,
+            config::DEFAULT_DISK_CACHE_MB,
+        )));
+    }
+    if builder.uses_real_data() && a.refine_below.is_some() {
+        bail!("--refine-below cuts the procedural planet; real data is refined below its own end");
+    }
+    builder.seed(a.seed).refine_below(a.refine_below);
+    if let Some(f) = a.request_lookahead {
+        builder.request_lookahead_frames(f);
+    }
+    let lookahead = builder.lookahead_frames();
+    if !(0.0..=1000.0).contains(&lookahead) {
+        bail!("--request-lookahead {lookahead} must be a number of frames from 0 to 1000");
+    }
+    Ok(builder)
+}
+
+/// `WxH` in pixels.
+pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s:?} must look like 1920x1080"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s:?}: width is not a whole number"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size {s:?}: height is not a whole number"))?;
+    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+        bail!("--size {s:?}: width and height must be 1 to 16384 pixels");
+    }
+    Ok((w, h))
+}
+
+/// `LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG`.
+pub fn parse_camera(s: &str, above_ground: bool) -> anyhow::Result<CameraSpec> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 5 {
+        bail!("--camera {s:?} must be LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (5 numbers)");
+    }
+    let mut v = [0.0; 5];
+    for (i, (p, name)) in parts
+        .iter()
+        .zip(["LON", "LAT", "ALT_M", "HEADING_DEG", "PITCH_DEG"])
+        .enumerate()
+    {
+        v[i] = p
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .with_context(|| format!("--camera {s:?}: {name} {p:?} is not a number"))?;
+    }
+    let [lon, lat, alt, heading, pitch] = v;
+    geo_cmd::check_lon_lat(lon, lat).with_context(|| format!("--camera {s:?}"))?;
+    if !(-90.0..=90.0).contains(&pitch) {
+        bail!("--camera {s:?}: pitch {pitch} is outside -90..90 degrees");
+    }
+    let min_alt = if above_ground { 0.01 } else { -500.0 };
+    if !(min_alt..=1.0e9).contains(&alt) {
+        bail!("--camera {s:?}: altitude {alt} m is outside {min_alt}..1e9 m");
+    }
+    Ok(CameraSpec {
+        lon_deg: lon,
+        lat_deg: lat,
+        alt_m: alt,
+        heading_deg: heading.rem_euclid(360.0),
+        pitch_deg: pitch,
+        above_ground,
+    })
+}
+
+/// Fails early, with the path, if a file cannot be written there.
+pub fn check_writable(path: &Path) -> anyhow::Result<()> {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map(drop)
+        .with_context(|| format!("cannot write {}", path.display()))
+}

@@ -1,0 +1,46 @@
+//! `globus bench`: a camera path replayed offscreen (`path`), a jump between two views
+//! (`jump`), or a soak of random flights (`soak`), each printing JSON.
+
+mod jump;
+mod path;
+mod soak;
+
+use anyhow::bail;
+
+use crate::args::{self, BenchArgs};
+
+pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    let (width, height) = args::parse_size(&a.size)?;
+    let builder = args::globe_builder(&a.globe)?;
+    if !(a.fps > 0.0 && a.fps <= 1000.0) {
+        bail!("--fps {} must be above 0 and at most 1000", a.fps);
+    }
+    if let (Some(from), Some(to)) = (&a.from, &a.to) {
+        return jump::run(&a, &builder, from, to, (width, height));
+    }
+    if let Some(seconds) = a.soak {
+        if !(seconds > 0.0 && seconds.is_finite()) {
+            bail!("--soak {seconds} must be a positive number of seconds");
+        }
+        return soak::run(&a, &builder, seconds, (width, height));
+    }
+    let Some(path_file) = &a.path else {
+        bail!("bench needs --path FILE.json, or --from CAMERA --to CAMERA");
+    };
+    path::run(&a, &builder, path_file, (width, height))
+}
+
+/// Median, 95th percentile and maximum of a sample, as JSON.
+fn quantiles(mut v: Vec<f64>) -> serde_json::Value {
+    if v.is_empty() {
+        return serde_json::Value::Null;
+    }
+    v.sort_by(f64::total_cmp);
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+    serde_json::json!({"median": q(0.5), "p95": q(0.95), "max": q(1.0)})
+}
+
+/// Bytes as MiB for reports (NaN when unknown).
+fn mib(bytes: Option<u64>) -> f64 {
+    bytes.map_or(f64::NAN, |b| b as f64 / 1048576.0)
+}

@@ -1,0 +1,191 @@
+//! `globus bench --path`: a camera path replayed offscreen, frame by frame (or in real
+//! time), reporting per-frame costs and what became of the loads.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use globus_engine::{CameraSpec, FrameReport, GlobeBuilder, Headless};
+use serde_json::json;
+
+use super::quantiles;
+use crate::args::{self, BenchArgs};
+use crate::path::CameraPath;
+
+/// What one frame of the path cost and showed.
+#[derive(Clone, Copy, Debug)]
+struct FrameSample {
+    select_us: f64,
+    select_cpu_us: f64,
+    frame_ms: f64,
+    tiles_rendered: u32,
+    nodes_visited: u32,
+    draw_calls: u32,
+    triangles: u64,
+    tiles_wanted_not_drawable: u32,
+    tiles_showing_ancestor_imagery: u32,
+}
+
+impl FrameSample {
+    fn new(r: &FrameReport, frame_ms: f64) -> Self {
+        Self {
+            select_us: r.select_us,
+            select_cpu_us: r.select_cpu_us,
+            frame_ms,
+            tiles_rendered: r.draw.tiles,
+            nodes_visited: r.selection.nodes_visited,
+            draw_calls: r.draw.draw_calls,
+            triangles: r.draw.triangles,
+            tiles_wanted_not_drawable: r.wanted,
+            tiles_showing_ancestor_imagery: r.colours_pending,
+        }
+    }
+
+    fn complete(&self) -> bool {
+        self.tiles_wanted_not_drawable == 0 && self.tiles_showing_ancestor_imagery == 0
+    }
+}
+
+pub fn run(
+    a: &BenchArgs,
+    builder: &GlobeBuilder,
+    path_file: &Path,
+    (width, height): (u32, u32),
+) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(path_file)
+        .with_context(|| format!("cannot read {}", path_file.display()))?;
+    let mut off = Headless::new(builder, width, height)?;
+    let fov = a.globe.fov_deg;
+    let origin = path_file.display().to_string();
+    if builder.uses_real_data() {
+        // Streamed data knows its ground only once tiles are loaded: load the ground under
+        // every keyframe given above the ground (from 15 km up, looking down) first.
+        let points = std::cell::RefCell::new(Vec::new());
+        CameraPath::parse(&text, &origin, |lon, lat| {
+            points.borrow_mut().push((lon, lat));
+            0.0
+        })?;
+        for (lon, lat) in points.into_inner() {
+            let look_down = args::parse_camera(&format!("{lon},{lat},15000,0,-90"), false)?;
+            let view = look_down.view(off.globe(), fov, width, height);
+            off.render_complete(&view, Duration::from_secs(120), &mut [])?;
+        }
+    }
+    let path = {
+        let globe = off.globe();
+        CameraPath::parse(&text, &origin, |lon, lat| {
+            globe.drawn_ground_m(lon.to_radians(), lat.to_radians())
+        })?
+    };
+    if a.realtime {
+        // A viewer opens on its start view and shows it complete before the flight starts:
+        // load it first, so the flight is not timed from a cold start (pipeline compilation
+        // and the first tiles take the first second).
+        let view = camera_at(&path, 0.0).view(off.globe(), fov, width, height);
+        off.render_complete(&view, Duration::from_secs(120), &mut [])?;
+    }
+    // Counting starts with the path.
+    off.globe_mut().layer_mut().track_usage();
+    let frames = (path.duration() * a.fps).floor() as usize + 1;
+    let mut samples: Vec<FrameSample> = Vec::with_capacity(frames);
+    let mut deferred = 0u64;
+    let clock = Instant::now();
+    for i in 0..frames {
+        let t = i as f64 / a.fps;
+        if a.realtime {
+            let ahead = t - clock.elapsed().as_secs_f64();
+            if ahead > 0.0 {
+                std::thread::sleep(Duration::from_secs_f64(ahead));
+            }
+        }
+        let view = camera_at(&path, t).view(off.globe(), fov, width, height);
+        let started = Instant::now();
+        let r = off.update(&view);
+        off.draw(&mut []);
+        samples.push(FrameSample::new(&r, started.elapsed().as_secs_f64() * 1e3));
+        deferred += u64::from(r.requests_deferred);
+    }
+    let column = |f: fn(&FrameSample) -> f64| quantiles(samples.iter().map(f).collect());
+    let complete = samples.iter().filter(|s| s.complete()).count();
+    let per_tile: Vec<f64> = samples
+        .iter()
+        .filter(|s| s.tiles_rendered > 0)
+        .map(|s| f64::from(s.nodes_visited) / f64::from(s.tiles_rendered))
+        .collect();
+    let globe = off.globe();
+    let st = globe.layer().scheduler_stats();
+    let cs = globe.layer().colour_scheduler_stats();
+    let mut summary = json!({
+        "complete_frames_fraction": complete as f64 / frames.max(1) as f64,
+        "requests_deferred_while_moving": deferred,
+        "frames": frames,
+        "size": [width, height],
+        "sse_px": builder.error_bound_px(),
+        "realtime": a.realtime,
+        "wall_s": clock.elapsed().as_secs_f64(),
+        "mesh_error": a.globe.mesh_error,
+        "select_us": column(|s| s.select_us),
+        "frame_ms": column(|s| s.frame_ms),
+        "tiles_rendered": column(|s| f64::from(s.tiles_rendered)),
+        "nodes_visited": column(|s| f64::from(s.nodes_visited)),
+        "draw_calls": column(|s| f64::from(s.draw_calls)),
+        "triangles": column(|s| s.triangles as f64),
+        "select_cpu_us": column(|s| s.select_cpu_us),
+        "tiles_wanted_not_drawable": column(|s| f64::from(s.tiles_wanted_not_drawable)),
+        "tiles_showing_ancestor_imagery": column(|s| f64::from(s.tiles_showing_ancestor_imagery)),
+        "nodes_visited_per_tile": quantiles(per_tile),
+        "tiles_requested": st.requested,
+        "tiles_loaded": st.loaded,
+        "requests_cancelled": st.cancelled,
+        "loads_stopped_in_flight": st.cancelled_in_flight,
+        "retries": st.retries,
+        "tiles_failed": st.failed,
+        "imagery_requested": cs.requested,
+        "imagery_loaded": cs.loaded,
+        "imagery_stopped_in_flight": cs.cancelled_in_flight,
+        "adapter": off.gpu().adapter_description(),
+    });
+    if let Some(u) = globe.layer().usage()
+        && let Some(map) = summary.as_object_mut()
+    {
+        let fraction = |n: u64, of: u64| n as f64 / of.max(1) as f64;
+        for (k, v) in [
+            ("loaded_never_drawn", json!(u.loaded_never_drawn)),
+            (
+                "loaded_never_drawn_fraction",
+                json!(fraction(u.loaded_never_drawn, u.loaded)),
+            ),
+            ("fetched", json!(u.fetched)),
+            ("fetched_never_drawn", json!(u.fetched_never_drawn)),
+            (
+                "fetched_never_drawn_fraction",
+                json!(fraction(u.fetched_never_drawn, u.fetched)),
+            ),
+            (
+                "loaded_again_while_cached",
+                json!(u.loaded_again_while_cached),
+            ),
+            (
+                "loaded_again_after_eviction",
+                json!(u.loaded_again_after_eviction),
+            ),
+        ] {
+            map.insert(k.into(), v);
+        }
+    }
+    println!("{summary}");
+    Ok(())
+}
+
+/// The path's camera at time `t` (altitude above the ellipsoid).
+fn camera_at(path: &CameraPath, t: f64) -> CameraSpec {
+    let p = path.pose(t);
+    CameraSpec {
+        lon_deg: p.lon,
+        lat_deg: p.lat,
+        alt_m: p.alt,
+        heading_deg: p.heading,
+        pitch_deg: p.pitch,
+        above_ground: false,
+    }
+}

@@ -1,0 +1,76 @@
+//! `globus render`: one complete frame offscreen, written as PNG (and its statistics as
+//! JSON).
+
+use std::time::Duration;
+
+use anyhow::Context;
+use globus_engine::{Headless, save_png};
+use serde_json::json;
+
+use crate::args::{self, RenderArgs};
+
+pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let (width, height) = args::parse_size(&a.size)?;
+    let camera = args::parse_camera(&a.camera, a.above_ground)?;
+    let builder = args::globe_builder(&a.globe)?;
+    args::check_writable(&a.out)?;
+    if let Some(s) = &a.stats {
+        args::check_writable(s)?;
+    }
+    let mut off = Headless::new(&builder, width, height)?;
+    let timeout = Duration::from_secs_f64(a.timeout_s.max(0.0));
+    let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);
+    let mut frame = off.render_complete(&view, timeout, &mut [])?;
+    // Above the ground of streamed data: the ground is known once the tiles under the
+    // camera have loaded, so place the camera again and finish the picture from there.
+    for _ in 0..3 {
+        let placed = camera.view(off.globe(), a.globe.fov_deg, width, height);
+        if !camera.above_ground || (placed.position - view.position).length() < 0.1 {
+            break;
+        }
+        view = placed;
+        frame = off.render_complete(&view, timeout, &mut [])?;
+    }
+    if !frame.complete {
+        tracing::warn!(
+            "gave up waiting for tiles after {:.1} s; the picture is coarser than the SSE bound asks",
+            frame.load_ms / 1e3
+        );
+    }
+    save_png(&frame.image, &a.out)?;
+    if let Some(path) = &a.stats {
+        let r = &frame.report;
+        let s = &r.selection;
+        let per_slot = r.pool.gpu_bytes / u64::from(r.pool.capacity.max(1));
+        let altitude = off
+            .globe()
+            .ellipsoid()
+            .ecef_to_cartographic(view.position)
+            .map_or(f64::NAN, |c| c.height_m);
+        let stats = json!({
+            "tiles_rendered": r.draw.tiles,
+            "nodes_visited": s.nodes_visited,
+            "culled_frustum": s.culled_frustum,
+            "culled_horizon": s.culled_horizon,
+            "max_level": s.max_level,
+            "max_sse_px": s.max_sse_px,
+            "sse_bound_px": r.sse_bound_px,
+            "triangles": r.draw.triangles,
+            "draw_calls": r.draw.draw_calls,
+            "select_us": r.select_us,
+            "select_cpu_us": r.select_cpu_us,
+            "load_ms": frame.load_ms,
+            "complete": frame.complete,
+            "tiles_loaded": off.globe().layer().scheduler_stats().loaded,
+            "gpu_tile_bytes": per_slot * u64::from(r.pool.resident),
+            "gpu_pool_bytes": r.pool.gpu_bytes,
+            "adapter": off.gpu().adapter_description(),
+            "camera": {"lon": camera.lon_deg, "lat": camera.lat_deg, "alt_m": altitude,
+                        "heading": camera.heading_deg, "pitch": camera.pitch_deg},
+            "size": [width, height],
+        });
+        std::fs::write(path, serde_json::to_string_pretty(&stats)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,517 @@
+//! [`GlobeBuilder`]: everything that configures a globe, and the source factory that turns
+//! its layer descriptions into one terrain source.
+//!
+//! Sources can be opened on their own ([`GlobeBuilder::open_sources`]) before any window or
+//! GPU context exists, so a source that cannot be opened fails first, with one error naming
+//! it.
+
+use std::sync::Arc;
+
+use globus_geo::Ellipsoid;
+use globus_render::{GpuContext, TilePoolOptions};
+use globus_stream::decode::DecodeLimits;
+use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
+use globus_stream::open::{
+    DEFAULT_LAYER_CACHE_BYTES, LayerKind, SourceSpec, elevation_pyramid, imagery_pyramid,
+    open_layer,
+};
+use globus_stream::{
+    DEFAULT_BASE_CACHE_BYTES, ProceduralSource, RasterTerrainSource, RefinedSource,
+    TerrainLayerOptions, TerrainSource,
+};
+use globus_terrain::MeshOptions;
+use globus_terrain::refine::RefineOptions;
+
+use crate::memory::SourceBudgets;
+use crate::{EngineError, Globe};
+
+/// The default planet: seed 24 has about a third land and a mountain range at 46 N 7.6 E,
+/// where the benchmark path dives.
+pub const DEFAULT_SEED: u64 = 24;
+
+/// Default of [`GlobeBuilder::request_lookahead_frames`].
+pub const DEFAULT_REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
+
+/// Heights a real Earth's tiles may have before they are loaded (the deepest trench to above
+/// the highest peak): bounds unloaded tiles and places the horizon-culling body.
+const EARTH_HEIGHT_RANGE_M: (f64, f64) = (-11_000.0, 9_000.0);
+
+/// Vertex and index room of the GPU pools, as a fraction of every slot at full grid size.
+pub(crate) const GPU_POOL_FILL: f64 = 0.625;
+
+/// Builds a [`Globe`]: data sources, budgets, the error bound, the body and the elevation
+/// exaggeration. Setters take and return `&mut Self`, so options can be set conditionally;
+/// nothing is opened until [`GlobeBuilder::open_sources`] or [`GlobeBuilder::build`].
+///
+/// Without layers the globe is the procedural planet of [`GlobeBuilder::seed`].
+#[derive(Clone)]
+pub struct GlobeBuilder {
+    seed: u64,
+    max_sse_px: f64,
+    max_level: u8,
+    gpu_slots: u32,
+    uploads_per_frame: u32,
+    cache_bytes: usize,
+    memory_bytes: Option<u64>,
+    workers: usize,
+    mesh: MeshOptions,
+    refine_below: Option<u8>,
+    terrain: Vec<SourceSpec>,
+    imagery: Vec<SourceSpec>,
+    http: HttpOptions,
+    disk_cache: Option<DiskCacheOptions>,
+    request_lookahead_frames: f64,
+    ellipsoid: Ellipsoid,
+    viewport: Option<(u32, u32)>,
+    source: Option<Arc<dyn TerrainSource>>,
+}
+
+impl Default for GlobeBuilder {
+    fn default() -> Self {
+        Self {
+            seed: DEFAULT_SEED,
+            max_sse_px: 2.0,
+            max_level: 26,
+            gpu_slots: 1024,
+            uploads_per_frame: 24,
+            cache_bytes: TerrainLayerOptions::default().cache_bytes,
+            memory_bytes: None,
+            workers: TerrainLayerOptions::default().workers,
+            mesh: MeshOptions::default(),
+            refine_below: None,
+            terrain: Vec::new(),
+            imagery: Vec::new(),
+            http: HttpOptions::default(),
+            disk_cache: None,
+            request_lookahead_frames: DEFAULT_REQUEST_LOOKAHEAD_FRAMES,
+            ellipsoid: Ellipsoid::WGS84,
+            viewport: None,
+            source: None,
+        }
+    }
+}
+
+impl std::fmt::Debug for GlobeBuilder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GlobeBuilder")
+            .field("seed", &self.seed)
+            .field("max_sse_px", &self.max_sse_px)
+            .field("memory_bytes", &self.memory_bytes)
+            .field("terrain", &self.terrain)
+            .field("imagery", &self.imagery)
+            .field("exaggeration", &self.mesh.exaggeration)
+            .field("source", &self.source.as_ref().map(|s| s.name().to_owned()))
+            .finish_non_exhaustive()
+    }
+}
+
+impl GlobeBuilder {
+    /// The defaults: the procedural planet of seed [`DEFAULT_SEED`] on WGS84, a 2 px error
+    /// bound, a 512 MiB tile cache and 1024 GPU tile slots (no overall memory budget).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Seed of the procedural planet.
+    pub fn seed(&mut self, seed: u64) -> &mut Self {
+        self.seed = seed;
+        self
+    }
+
+    /// Screen-space error bound, pixels (default 2).
+    pub fn max_sse_px(&mut self, px: f64) -> &mut Self {
+        self.max_sse_px = px;
+        self
+    }
+
+    /// Deepest level drawn: of the procedural planet, or of refinement below real data.
+    pub fn max_level(&mut self, level: u8) -> &mut Self {
+        self.max_level = level;
+        self
+    }
+
+    /// GPU tile slots (ignored with a memory budget, which sizes the pools).
+    pub fn gpu_tiles(&mut self, slots: u32) -> &mut Self {
+        self.gpu_slots = slots;
+        self
+    }
+
+    /// Tiles uploaded to the GPU per frame at most (default 24).
+    pub fn uploads_per_frame(&mut self, n: u32) -> &mut Self {
+        self.uploads_per_frame = n;
+        self
+    }
+
+    /// Bytes of loaded tiles kept in RAM (ignored with a memory budget).
+    pub fn cache_bytes(&mut self, bytes: usize) -> &mut Self {
+        self.cache_bytes = bytes;
+        self
+    }
+
+    /// One budget for all memory the globe holds ([`crate::memory`]): it sizes the tile
+    /// cache, the GPU pools and the sources' caches, replacing [`GlobeBuilder::cache_bytes`]
+    /// and [`GlobeBuilder::gpu_tiles`]. `None` removes it.
+    pub fn memory_budget(&mut self, bytes: Option<u64>) -> &mut Self {
+        self.memory_bytes = bytes;
+        self
+    }
+
+    /// Tile loader threads.
+    pub fn workers(&mut self, n: usize) -> &mut Self {
+        self.workers = n;
+        self
+    }
+
+    /// Vertical error a tile's adaptive mesh may add, as a fraction of the tile's geometric
+    /// error (0 draws every sample of the tile grid; default 0.25).
+    pub fn mesh_error(&mut self, fraction: f64) -> &mut Self {
+        self.mesh.error_fraction = fraction;
+        self
+    }
+
+    /// Elevation exaggeration (Kaiser 2018, 3.4): terrain is drawn this many times its height
+    /// above the ellipsoid, with skirts, bounds, culling and LOD errors to match. Anything
+    /// placed at an altitude through [`Globe::world_position`] is raised the same way, so
+    /// flight levels keep their place above the ground. Default 1.
+    pub fn exaggeration(&mut self, factor: f64) -> &mut Self {
+        self.mesh.exaggeration = factor;
+        self
+    }
+
+    /// Treat the procedural planet's data as ending at this level and invent everything
+    /// deeper by procedural refinement (a stand-in for real data that ends); `None`
+    /// generates every level.
+    pub fn refine_below(&mut self, level: Option<u8>) -> &mut Self {
+        self.refine_below = level;
+        self
+    }
+
+    /// Adds an elevation layer on top of the others.
+    pub fn terrain(&mut self, spec: SourceSpec) -> &mut Self {
+        self.terrain.push(spec);
+        self.source = None;
+        self
+    }
+
+    /// Adds an imagery layer over the others.
+    pub fn imagery(&mut self, spec: SourceSpec) -> &mut Self {
+        self.imagery.push(spec);
+        self.source = None;
+        self
+    }
+
+    /// How tile services are spoken to.
+    pub fn http(&mut self, options: HttpOptions) -> &mut Self {
+        self.http = options;
+        self
+    }
+
+    /// An on-disk cache for tiles from services.
+    pub fn disk_cache(&mut self, options: Option<DiskCacheOptions>) -> &mut Self {
+        self.disk_cache = options;
+        self
+    }
+
+    /// Requests culled while moving: a wanted tile outside the view the camera will have
+    /// after this many more frames at its current velocity is not requested while a loaded
+    /// ancestor can stand in for it. 0 requests everything (default 3; Cesium's
+    /// `cullRequestsWhileMoving` serves the same end).
+    pub fn request_lookahead_frames(&mut self, frames: f64) -> &mut Self {
+        self.request_lookahead_frames = frames;
+        self
+    }
+
+    /// The body the terrain is on (default WGS84). Real layers are georeferenced on it; the
+    /// procedural planet is generated on it.
+    pub fn ellipsoid(&mut self, ellipsoid: Ellipsoid) -> &mut Self {
+        self.ellipsoid = ellipsoid;
+        self.source = None;
+        self
+    }
+
+    /// The size frames will have, if known now: the frame's depth and id buffers are then
+    /// made before the memory budget measures the process.
+    pub fn viewport(&mut self, width_px: u32, height_px: u32) -> &mut Self {
+        self.viewport = Some((width_px, height_px));
+        self
+    }
+
+    /// Draws terrain from `source` instead of the layers or the procedural planet: any
+    /// [`TerrainSource`], for example one of the application's own or a wrapper around
+    /// [`GlobeBuilder::open_source`]'s.
+    pub fn source(&mut self, source: Arc<dyn TerrainSource>) -> &mut Self {
+        self.source = Some(source);
+        self
+    }
+
+    /// Opens the data sources now (if not opened already) and keeps them for
+    /// [`GlobeBuilder::build`]: call it before creating a window, so that a source that cannot
+    /// be opened fails first.
+    pub fn open_sources(&mut self) -> Result<&mut Self, EngineError> {
+        if self.source.is_none() {
+            self.source = Some(self.open_source()?);
+        }
+        Ok(self)
+    }
+
+    /// The terrain source the options describe (the one given with
+    /// [`GlobeBuilder::source`], if any): the procedural planet (optionally cut at a level
+    /// and refined below), or real elevation and imagery layers refined below their data.
+    pub fn open_source(&self) -> Result<Arc<dyn TerrainSource>, EngineError> {
+        if let Some(source) = &self.source {
+            return Ok(Arc::clone(source));
+        }
+        let budgets = self.source_budgets();
+        let refined = |data: Arc<dyn TerrainSource>| -> Arc<dyn TerrainSource> {
+            Arc::new(
+                RefinedSource::new(data, RefineOptions::default(), self.max_level, self.mesh)
+                    .with_base_cache_bytes(budgets.refine_bases),
+            )
+        };
+        if !self.uses_real_data() {
+            let planet = |level: u8| {
+                ProceduralSource::with_ellipsoid(self.seed, self.ellipsoid, level)
+                    .with_mesh_options(self.mesh)
+            };
+            return Ok(match self.refine_below {
+                None => Arc::new(planet(self.max_level)),
+                Some(level) => refined(Arc::new(planet(level.min(self.max_level)))),
+            });
+        }
+        let client = Arc::new(HttpClient::new(self.http.clone()));
+        let limits = DecodeLimits::default();
+        let open = |spec: &SourceSpec, kind: LayerKind| {
+            let what = match kind {
+                LayerKind::Elevation => "terrain",
+                LayerKind::Imagery => "imagery",
+            };
+            let fail = |message: String| EngineError::Source {
+                what,
+                url: spec.url.clone(),
+                message,
+            };
+            open_layer(spec, kind, &client, self.disk_cache.as_ref()).map_err(fail)
+        };
+        let mut elevation = Vec::new();
+        for spec in &self.terrain {
+            let layer = open(spec, LayerKind::Elevation)?;
+            let pyramid =
+                elevation_pyramid(layer, limits, budgets.per_layer).map_err(|message| {
+                    EngineError::Source {
+                        what: "terrain",
+                        url: spec.url.clone(),
+                        message,
+                    }
+                })?;
+            elevation.push(pyramid);
+        }
+        let mut imagery = Vec::new();
+        for spec in &self.imagery {
+            let layer = open(spec, LayerKind::Imagery)?;
+            imagery.push(imagery_pyramid(layer, limits, budgets.per_layer));
+        }
+        let raster = RasterTerrainSource::new(
+            elevation,
+            imagery,
+            self.ellipsoid,
+            EARTH_HEIGHT_RANGE_M,
+            self.mesh,
+        )
+        .map_err(EngineError::Layers)?;
+        Ok(refined(Arc::new(raster)))
+    }
+
+    /// Builds the globe on `gpu`, drawing into colour targets of `colour_format`, opening the
+    /// sources first if [`GlobeBuilder::open_sources`] has not. With a memory budget the
+    /// process's footprint is measured now and the rest is shared out
+    /// ([`crate::memory::MemoryPlan`]); a budget too small for it fails here.
+    pub fn build(
+        &self,
+        gpu: &GpuContext,
+        colour_format: wgpu::TextureFormat,
+    ) -> Result<Globe, EngineError> {
+        self.check()?;
+        let source = self.open_source()?;
+        Globe::new(self, gpu, colour_format, source)
+    }
+
+    /// Refuses options out of their ranges, naming the option.
+    fn check(&self) -> Result<(), EngineError> {
+        let invalid = |option, value: f64, expected| EngineError::InvalidOption {
+            option,
+            value: value.to_string(),
+            expected,
+        };
+        if !(self.max_sse_px > 0.0 && self.max_sse_px <= 1000.0) {
+            return Err(invalid(
+                "error bound",
+                self.max_sse_px,
+                "must be a pixel error above 0 and at most 1000",
+            ));
+        }
+        if !(0.0..=4.0).contains(&self.mesh.error_fraction) {
+            return Err(invalid(
+                "mesh error",
+                self.mesh.error_fraction,
+                "must be a fraction of the tile error from 0 to 4",
+            ));
+        }
+        if !(0.0..=1000.0).contains(&self.mesh.exaggeration) {
+            return Err(invalid(
+                "exaggeration",
+                self.mesh.exaggeration,
+                "must be a factor from 0 to 1000",
+            ));
+        }
+        if !(0.0..=1000.0).contains(&self.request_lookahead_frames) {
+            return Err(invalid(
+                "request lookahead",
+                self.request_lookahead_frames,
+                "must be a number of frames from 0 to 1000",
+            ));
+        }
+        if self.memory_bytes == Some(0) {
+            return Err(invalid("memory budget", 0.0, "must be above 0"));
+        }
+        if self.uses_real_data() && self.refine_below.is_some() {
+            return Err(EngineError::InvalidOption {
+                option: "refine below",
+                value: format!("{:?}", self.refine_below),
+                expected: "cuts the procedural planet; real data is refined below its own end",
+            });
+        }
+        Ok(())
+    }
+
+    /// Whether the globe streams real data (else it is the procedural planet).
+    pub fn uses_real_data(&self) -> bool {
+        !(self.terrain.is_empty() && self.imagery.is_empty())
+    }
+
+    /// The screen-space error bound, pixels.
+    pub fn error_bound_px(&self) -> f64 {
+        self.max_sse_px
+    }
+
+    /// The memory budget, bytes, if there is one.
+    pub fn memory_budget_bytes(&self) -> Option<u64> {
+        self.memory_bytes
+    }
+
+    /// The tile cache's size without a memory budget, bytes.
+    pub fn tile_cache_bytes(&self) -> usize {
+        self.cache_bytes
+    }
+
+    /// GPU tile slots without a memory budget.
+    pub fn gpu_tile_slots(&self) -> u32 {
+        self.gpu_slots
+    }
+
+    /// Tile loader threads asked for.
+    pub fn worker_threads(&self) -> usize {
+        self.workers
+    }
+
+    /// The deepest level drawn.
+    pub fn deepest_level(&self) -> u8 {
+        self.max_level
+    }
+
+    /// The HTTP settings.
+    pub fn http_options(&self) -> &HttpOptions {
+        &self.http
+    }
+
+    /// The disk cache, if any.
+    pub fn disk_cache_options(&self) -> Option<&DiskCacheOptions> {
+        self.disk_cache.as_ref()
+    }
+
+    /// The elevation layers, bottom first.
+    pub fn terrain_layers(&self) -> &[SourceSpec] {
+        &self.terrain
+    }
+
+    /// The imagery layers, bottom first.
+    pub fn imagery_layers(&self) -> &[SourceSpec] {
+        &self.imagery
+    }
+
+    /// The request lookahead, frames.
+    pub fn lookahead_frames(&self) -> f64 {
+        self.request_lookahead_frames
+    }
+
+    /// The elevation exaggeration.
+    pub fn exaggeration_factor(&self) -> f64 {
+        self.mesh.exaggeration
+    }
+
+    /// The mesh error fraction.
+    pub fn mesh_error_fraction(&self) -> f64 {
+        self.mesh.error_fraction
+    }
+
+    pub(crate) fn settings(&self) -> Settings {
+        Settings {
+            max_sse_px: self.max_sse_px,
+            gpu_slots: self.gpu_slots,
+            uploads_per_frame: self.uploads_per_frame,
+            cache_bytes: self.cache_bytes,
+            memory_bytes: self.memory_bytes,
+            layer_workers: self.layer_workers(),
+            source_caches: self.uses_real_data() || self.refine_below.is_some(),
+            request_lookahead_frames: self.request_lookahead_frames,
+            exaggeration: self.mesh.exaggeration,
+            viewport: self.viewport,
+        }
+    }
+
+    /// Loader threads of the terrain layer (its colour loads have as many again).
+    fn layer_workers(&self) -> usize {
+        // Loads from tile services mostly wait on the network: enough of them to keep two
+        // hosts at their concurrency limit.
+        if self.uses_real_data() {
+            self.workers.max(2 * self.http.per_host)
+        } else {
+            self.workers
+        }
+    }
+
+    /// The sources' share of the memory budget (their defaults without one).
+    fn source_budgets(&self) -> SourceBudgets {
+        match self.memory_bytes {
+            Some(total) => SourceBudgets::of(total, self.terrain.len() + self.imagery.len()),
+            None => SourceBudgets {
+                per_layer: DEFAULT_LAYER_CACHE_BYTES,
+                refine_bases: DEFAULT_BASE_CACHE_BYTES,
+            },
+        }
+    }
+}
+
+/// What [`Globe`] keeps of the builder.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Settings {
+    pub max_sse_px: f64,
+    pub gpu_slots: u32,
+    pub uploads_per_frame: u32,
+    pub cache_bytes: usize,
+    pub memory_bytes: Option<u64>,
+    pub layer_workers: usize,
+    pub source_caches: bool,
+    pub request_lookahead_frames: f64,
+    pub exaggeration: f64,
+    pub viewport: Option<(u32, u32)>,
+}
+
+impl Settings {
+    /// Pools of `slots` slots with the configured upload budget.
+    pub fn pool_options(&self, slots: u32) -> TilePoolOptions {
+        TilePoolOptions {
+            uploads_per_frame: self.uploads_per_frame,
+            ..TilePoolOptions::with_slots(slots, GPU_POOL_FILL)
+        }
+    }
+}

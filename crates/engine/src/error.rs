@@ -1,0 +1,49 @@
+//! The engine's errors: one enum for everything that can fail when a globe is built or
+//! asked something, each naming what failed.
+
+/// Why a globe could not be built, or a request to it failed.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// A data source named in the options could not be opened.
+    #[error("{what} {url}: {message}")]
+    Source {
+        /// "terrain" or "imagery".
+        what: &'static str,
+        /// The source's location, as given.
+        url: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// The layers opened but cannot be combined into a terrain source.
+    #[error("the terrain and imagery layers cannot be combined: {0}")]
+    Layers(String),
+    /// The memory budget cannot hold the process and a usable cache and pool.
+    #[error(
+        "a memory budget of {total_mib} MiB is too small: this process already holds \
+         {baseline_mib} MiB before any tile, and with {workers} loader threads it needs at \
+         least {least_mib} MiB"
+    )]
+    MemoryBudget {
+        /// The budget asked for, MiB.
+        total_mib: u64,
+        /// What the process held before any tile, MiB.
+        baseline_mib: u64,
+        /// Loader threads the budget must leave room for.
+        workers: usize,
+        /// The least budget that works, MiB.
+        least_mib: u64,
+    },
+    /// An option is out of its range.
+    #[error("{option} {value}: {expected}")]
+    InvalidOption {
+        /// The option's name.
+        option: &'static str,
+        /// The value given.
+        value: String,
+        /// What it must be.
+        expected: &'static str,
+    },
+    /// The GPU could not do what was asked (no adapter, a failed readback).
+    #[error(transparent)]
+    Render(#[from] globus_render::RenderError),
+}

@@ -1,0 +1,76 @@
+//! Stage 1, select: LOD selection over the data side's answers, with "loaded" meaning
+//! "resident on the GPU", from the engine's own record of what is resident.
+
+use globus_render::Residency;
+use globus_stream::TerrainLayer;
+use globus_tiling::{TileInfo, TileKey, TileOracle, TileState, TilingScheme};
+
+/// The oracle selection walks: the layer's bounds, errors and load states, where a tile
+/// counts as loaded only if it is also resident in the GPU pools. Everything selection then
+/// draws can be drawn this very frame: no holes while data streams in, only coarser
+/// ancestors. Nothing is copied from the pools into the layer.
+pub(crate) struct ResidentOracle<'a> {
+    pub layer: &'a TerrainLayer,
+    pub residency: &'a Residency,
+}
+
+impl TileOracle for ResidentOracle<'_> {
+    fn scheme(&self) -> TilingScheme {
+        self.layer.scheme()
+    }
+
+    fn tile(&self, key: TileKey) -> TileInfo {
+        let mut info = self.layer.tile(key);
+        if info.state == TileState::Loaded && self.residency.get(key).is_none() {
+            info.state = TileState::Unloaded;
+        }
+        info
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use globus_geo::DVec3;
+    use globus_stream::{ProceduralSource, TerrainLayerOptions};
+
+    #[test]
+    fn a_cached_tile_is_drawable_only_once_it_is_resident() {
+        let mut layer = TerrainLayer::new(
+            Arc::new(ProceduralSource::new(24, 4)),
+            TerrainLayerOptions {
+                cache_bytes: 64 << 20,
+                workers: 1,
+            },
+        );
+        let root = TileKey::new(0, 0, 0);
+        let request = globus_tiling::TileRequest {
+            key: root,
+            priority: 1.0,
+        };
+        layer.update(&[], &[], &[request]);
+        while layer.get(root).is_none() {
+            layer.wait_for_tiles(Duration::from_millis(100));
+        }
+        let mut residency = Residency::new(4, 10_000, 10_000);
+        let oracle = ResidentOracle {
+            layer: &layer,
+            residency: &residency,
+        };
+        assert_eq!(layer.tile(root).state, TileState::Loaded);
+        assert_eq!(oracle.tile(root).state, TileState::Unloaded);
+        residency.begin_frame();
+        let mut evicted = Vec::new();
+        residency.place(root, 10, 30, DVec3::ZERO, &mut evicted);
+        let oracle = ResidentOracle {
+            layer: &layer,
+            residency: &residency,
+        };
+        assert_eq!(oracle.tile(root).state, TileState::Loaded);
+        // Bounds and errors are the layer's.
+        assert_eq!(oracle.tile(root).bounds, layer.tile(root).bounds);
+    }
+}

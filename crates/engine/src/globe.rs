@@ -1,0 +1,662 @@
+//! [`Globe`]: the facade over the three subsystems, and one frame as named stages.
+//!
+//! ```text
+//!  update(view):
+//!   select ──> plan ──────────────> residency ─────────> draw list
+//!   (LOD over    (load / upload /     (GPU uploads within   (offsets and indirect
+//!    the layer,   defer, tiles in      the frame's budget,   draws for the tiles
+//!    resident     use: recency for     late colours first)   selected)
+//!    = drawable)  cache and pools)
+//!                      │
+//!                      └──> TerrainLayer::update (scheduler, cache)
+//!  render(encoder, colour, overlays):
+//!   terrain pass (sky, tiles) ──> world overlays ──> screen-aligned ──> screen (HUD)
+//!        one colour target, one id buffer, one depth buffer kept for all but the last
+//! ```
+//!
+//! Selection sees a tile as loaded only when it is both in the CPU cache and resident in the
+//! GPU pools ([`crate::frame`]), so everything it draws can be drawn this very frame: no
+//! holes while data streams in, only coarser ancestors.
+
+use std::time::{Duration, Instant};
+
+use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
+use globus_render::{
+    DrawStats, FrameCamera, FrameFormats, FrameInputs, FrameTargets, GlobeRenderer, GpuContext,
+    Lighting, NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
+};
+use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
+use globus_tiling::{Selection, SelectionOptions, SelectionStats, TileKey, select_into};
+
+use crate::builder::Settings;
+use crate::frame::plan::{FramePlan, Motion};
+use crate::frame::select::ResidentOracle;
+use crate::frame::upload::make_resident;
+use crate::memory::{MemoryPlan, resident_bytes};
+use crate::overlay::{FrameContext, Overlay, OverlayPass};
+use crate::query::{self, TerrainHeight};
+use crate::{EngineError, GlobeBuilder};
+
+/// What one frame did.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameReport {
+    /// Selection counters.
+    pub selection: SelectionStats,
+    /// Microseconds spent in selection (wall clock).
+    pub select_us: f64,
+    /// CPU microseconds the render thread spent in selection (excludes time the thread was
+    /// preempted by loaders or the software rasteriser on a busy machine).
+    pub select_cpu_us: f64,
+    /// Tiles wanted but not drawable yet (loading or uploading).
+    pub wanted: u32,
+    /// Data-side counters.
+    pub layer: LayerStats,
+    /// GPU pool counters.
+    pub pool: PoolStats,
+    /// What will be drawn.
+    pub draw: DrawStats,
+    /// The screen-space error bound used this frame (raised when budgets bind).
+    pub sse_bound_px: f64,
+    /// Wanted tiles not requested because the moving camera will have left them behind
+    /// ([`Globe::set_request_lookahead_frames`]).
+    pub requests_deferred: u32,
+    /// Drawn tiles showing an ancestor's colour while their own loads (or waits for upload).
+    pub colours_pending: u32,
+}
+
+impl FrameReport {
+    /// Whether everything the selection wants is drawn, imagery included.
+    pub fn is_complete(&self) -> bool {
+        self.wanted == 0 && self.colours_pending == 0
+    }
+}
+
+/// The memory budget and what its parts hold ([`Globe::memory_use`]), bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryUse {
+    /// The plan, if the globe has a budget.
+    pub plan: Option<MemoryPlan>,
+    /// Loaded tiles in the cache.
+    pub tile_cache: u64,
+    /// Budget of the tile cache.
+    pub tile_cache_budget: u64,
+    /// The sources' own caches (decoded source tiles, refinement bases).
+    pub sources: u64,
+    /// The GPU pools (allocated in full at start).
+    pub gpu_pool: u64,
+    /// Resident memory of the whole process (Linux).
+    pub resident: Option<u64>,
+}
+
+/// What is under a pixel ([`Globe::pick`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pick {
+    surface: Option<DVec3>,
+    object: Option<u32>,
+}
+
+impl Pick {
+    /// The terrain point under the pixel, ECEF metres on the drawn (exaggerated) surface:
+    /// from the depth buffer, refined against the loaded terrain. `None` over the sky.
+    pub fn surface(&self) -> Option<DVec3> {
+        self.surface
+    }
+
+    /// The id an overlay wrote at the pixel, if any.
+    pub fn object(&self) -> Option<u32> {
+        self.object
+    }
+}
+
+/// A planet: its data layer, its renderer, the frame's camera and the overlay passes. See
+/// the crate documentation for how to embed one.
+pub struct Globe {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    layer: TerrainLayer,
+    renderer: GlobeRenderer,
+    formats: FrameFormats,
+    targets: Option<FrameTargets>,
+    selection_options: SelectionOptions,
+    settings: Settings,
+    selection: Selection,
+    plan: FramePlan,
+    lighting: Option<Lighting>,
+    relax_detail: bool,
+    request_lookahead_frames: f64,
+    last_eye: Option<DVec3>,
+    memory: Option<MemoryPlan>,
+    /// The camera of the last update.
+    camera: Option<FrameCamera>,
+    /// The camera of the last render (what the targets hold).
+    drawn_camera: Option<FrameCamera>,
+    /// Largest near plane (depends on the backend's depth range).
+    near_cap_m: f64,
+}
+
+impl Globe {
+    /// A builder with the defaults (the procedural planet).
+    pub fn builder() -> GlobeBuilder {
+        GlobeBuilder::new()
+    }
+
+    pub(crate) fn new(
+        builder: &GlobeBuilder,
+        gpu: &GpuContext,
+        colour_format: wgpu::TextureFormat,
+        source: std::sync::Arc<dyn TerrainSource>,
+    ) -> Result<Self, EngineError> {
+        let settings = builder.settings();
+        let device = &gpu.device;
+        // The frame's targets first: a memory budget counts them in the process's footprint.
+        let targets = settings
+            .viewport
+            .map(|(w, h)| FrameTargets::new(device, w, h));
+        let workers = settings.layer_workers;
+        let memory = match settings.memory_bytes {
+            Some(total) => Some(MemoryPlan::new(
+                total,
+                resident_bytes(),
+                // The terrain layer's loaders and as many for colour.
+                2 * workers,
+                settings.source_caches,
+                |slots| settings.pool_options(slots).gpu_bytes(),
+            )?),
+            None => None,
+        };
+        let layer = TerrainLayer::new(
+            source,
+            TerrainLayerOptions {
+                cache_bytes: memory.map_or(settings.cache_bytes, |m| m.tile_cache as usize),
+                workers,
+            },
+        );
+        let slots = memory.map_or(settings.gpu_slots, |m| m.gpu_slots);
+        let pool = TilePool::new(device, settings.pool_options(slots));
+        let selection_options = SelectionOptions {
+            max_sse_px: settings.max_sse_px,
+            occluder: *layer.occluder(),
+            near_m: 0.01,
+            max_level: layer.max_level(),
+        };
+        let formats = FrameFormats::new(colour_format);
+        tracing::debug!(
+            source = layer.source().name(),
+            slots,
+            cache_bytes = layer.cache_bytes().1,
+            "globe built"
+        );
+        Ok(Self {
+            device: device.clone(),
+            queue: gpu.queue.clone(),
+            layer,
+            renderer: GlobeRenderer::new(device, formats, pool),
+            formats,
+            targets,
+            selection_options,
+            settings,
+            selection: Selection::default(),
+            plan: FramePlan::default(),
+            lighting: None,
+            relax_detail: true,
+            request_lookahead_frames: settings.request_lookahead_frames,
+            last_eye: None,
+            memory,
+            camera: None,
+            drawn_camera: None,
+            near_cap_m: if gpu.adapter.get_info().backend == wgpu::Backend::Gl {
+                NEAR_PLANE_CAP_GL_M
+            } else {
+                NEAR_PLANE_CAP_M
+            },
+        })
+    }
+
+    /// The body the globe is on.
+    pub fn ellipsoid(&self) -> Ellipsoid {
+        *self.layer.ellipsoid()
+    }
+
+    /// The elevation exaggeration terrain (and anything placed through
+    /// [`Globe::world_position`]) is drawn with.
+    pub fn exaggeration(&self) -> f64 {
+        self.settings.exaggeration
+    }
+
+    /// The ECEF point drawn for a geodetic position: its height above the ellipsoid times the
+    /// exaggeration, as the terrain is drawn. Overlays place everything through this (or
+    /// [`FrameContext::world_position`]), so a flight level stays at its height above the
+    /// drawn ground.
+    pub fn world_position(&self, at: Cartographic) -> DVec3 {
+        exaggerated(self.layer.ellipsoid(), self.settings.exaggeration, at)
+    }
+
+    /// The geodetic position of a drawn ECEF point, its height in true metres (the inverse
+    /// of [`Globe::world_position`]). `None` at the centre of the body.
+    pub fn cartographic(&self, world: DVec3) -> Option<Cartographic> {
+        let mut c = self.layer.ellipsoid().ecef_to_cartographic(world)?;
+        let e = self.settings.exaggeration;
+        if e > 0.0 {
+            c.height_m /= e;
+        }
+        Some(c)
+    }
+
+    /// The formats of the frame's targets (for overlays' pipelines).
+    pub fn formats(&self) -> FrameFormats {
+        self.formats
+    }
+
+    /// The camera of the last [`Globe::update`]: origin, matrices, near plane, viewport and
+    /// projection of world points to pixels.
+    pub fn camera(&self) -> Option<&FrameCamera> {
+        self.camera.as_ref()
+    }
+
+    /// The data layer (scheduler, cache and counters).
+    pub fn layer(&self) -> &TerrainLayer {
+        &self.layer
+    }
+
+    /// The data layer, to wait for tiles or track usage.
+    pub fn layer_mut(&mut self) -> &mut TerrainLayer {
+        &mut self.layer
+    }
+
+    /// Counters of the GPU pools.
+    pub fn pool_stats(&self) -> PoolStats {
+        self.renderer.pool().stats()
+    }
+
+    /// Sets the sun and air (`None`: a default sun for each view,
+    /// [`Globe::default_lighting`]).
+    pub fn set_lighting(&mut self, lighting: Option<Lighting>) {
+        self.lighting = lighting;
+    }
+
+    /// Whether the error bound may come back down after budgets forced it up (on by
+    /// default; off for frames that must settle, as [`Globe::load_completely`] does).
+    pub fn set_relax_detail(&mut self, relax: bool) {
+        self.relax_detail = relax;
+    }
+
+    /// See [`GlobeBuilder::request_lookahead_frames`]; may be changed between frames.
+    pub fn set_request_lookahead_frames(&mut self, frames: f64) {
+        self.request_lookahead_frames = frames;
+    }
+
+    /// Tiles uploaded to the GPU per frame at most.
+    pub fn set_uploads_per_frame(&mut self, n: u32) {
+        self.renderer.pool_mut().set_uploads_per_frame(n);
+    }
+
+    /// The memory budget's plan (if the globe has one) and what each part holds now.
+    pub fn memory_use(&self) -> MemoryUse {
+        let (cache, budget) = self.layer.cache_bytes();
+        MemoryUse {
+            plan: self.memory,
+            tile_cache: cache as u64,
+            tile_cache_budget: budget as u64,
+            sources: self.layer.source().cached_bytes() as u64,
+            gpu_pool: self.renderer.pool().stats().gpu_bytes,
+            resident: resident_bytes(),
+        }
+    }
+
+    /// The height at a longitude and latitude (radians) from the finest loaded tiles around
+    /// it (bilinear, the same on both sides of a tile edge), in true metres, with the level
+    /// it came from. `None` where nothing is loaded yet.
+    pub fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<TerrainHeight> {
+        query::height_at(&self.layer, lon_rad, lat_rad)
+    }
+
+    /// The unit normal of the drawn surface at a longitude and latitude (radians), from the
+    /// loaded tiles. `None` where nothing is loaded.
+    pub fn normal_at(&self, lon_rad: f64, lat_rad: f64) -> Option<DVec3> {
+        query::normal_at(
+            &self.layer,
+            self.layer.ellipsoid(),
+            self.settings.exaggeration,
+            lon_rad,
+            lat_rad,
+        )
+    }
+
+    /// The best known ground height at a longitude and latitude (radians), true metres: the
+    /// source's own full-resolution answer if it has one (the procedural planet), else the
+    /// loaded tiles' ([`Globe::height_at`]), else 0.
+    pub fn ground_height_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
+        if let Some(h) = self.layer.source().height_at(lon_rad, lat_rad) {
+            return h;
+        }
+        self.height_at(lon_rad, lat_rad)
+            .map_or(0.0, |h| h.height_m())
+    }
+
+    /// The ground height as drawn (times the exaggeration), metres above the ellipsoid.
+    pub fn drawn_ground_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
+        self.ground_height_m(lon_rad, lat_rad) * self.settings.exaggeration
+    }
+
+    /// The first point where a ray (ECEF origin and direction) meets the drawn surface of
+    /// the loaded terrain. `None` if it misses (or nothing is loaded where it would hit).
+    pub fn ray_pick(&self, origin: DVec3, direction: DVec3) -> Option<DVec3> {
+        let (lo, hi) = self.layer.source().height_range_m();
+        query::ray_march(
+            self.layer.ellipsoid(),
+            |lon, lat| self.drawn_height_loaded(lon, lat),
+            (lo.min(0.0), hi),
+            origin,
+            direction,
+        )
+    }
+
+    /// The drawn height of the loaded terrain (`None` where nothing is loaded).
+    fn drawn_height_loaded(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
+        self.height_at(lon_rad, lat_rad)
+            .map(|h| h.height_m() * self.settings.exaggeration)
+    }
+
+    /// The default sun for a camera: over a point 35 degrees west of it and at half its
+    /// latitude less 10 degrees, so that anywhere on Earth the view is lit from the
+    /// south-west (north-west in the south) about 40 degrees above the horizon, and relief
+    /// casts visible shading.
+    pub fn default_lighting(view: &View, ellipsoid: &Ellipsoid) -> Lighting {
+        let c = ellipsoid
+            .ecef_to_cartographic(view.position)
+            .unwrap_or_default();
+        let lat = c.lat_rad * 0.5 - 10f64.to_radians() * c.lat_rad.signum();
+        Lighting::sun_over(c.lon_rad - 35f64.to_radians(), lat)
+    }
+
+    /// Runs one frame's CPU work and uploads for `view`: selection, the plan, data requests,
+    /// GPU residency and the draw list. Then [`Globe::render`] draws it.
+    pub fn update(&mut self, view: &View) -> FrameReport {
+        let ellipsoid = self.ellipsoid();
+        let eye = ellipsoid
+            .ecef_to_cartographic(view.position)
+            .unwrap_or_default();
+        let ground = self.drawn_ground_m(eye.lon_rad, eye.lat_rad);
+        let near_m = near_plane_m((eye.height_m - ground).max(0.0), self.near_cap_m);
+        self.selection_options.near_m = near_m;
+        let camera = FrameCamera::new(view, near_m);
+        self.camera = Some(camera);
+        self.renderer.pool_mut().begin_frame();
+
+        // Select.
+        let started = Instant::now();
+        let started_cpu = cpu_time::ThreadTime::try_now().ok();
+        let oracle = ResidentOracle {
+            layer: &self.layer,
+            residency: self.renderer.pool().residency(),
+        };
+        select_into(view, &oracle, &self.selection_options, &mut self.selection);
+        let select_us = started.elapsed().as_secs_f64() * 1e6;
+        let select_cpu_us = started_cpu.map_or(f64::NAN, |t| t.elapsed().as_secs_f64() * 1e6);
+
+        // Plan: what to load, upload and defer.
+        let last_eye = self.last_eye.replace(view.position);
+        self.plan.make(
+            &self.selection,
+            &self.layer,
+            self.renderer.pool().residency(),
+            Motion {
+                view,
+                last_eye,
+                lookahead_frames: self.request_lookahead_frames,
+                near_m,
+            },
+        );
+        let layer_stats =
+            self.layer
+                .update(&self.selection.draw, &self.plan.in_use, &self.plan.to_load);
+
+        // GPU residency.
+        let residency = make_resident(
+            self.renderer.pool_mut(),
+            &self.queue,
+            &self.layer,
+            &self.plan,
+            &self.selection.draw,
+        );
+        self.adapt_detail(residency.pool_full || layer_stats.over_budget);
+
+        // Draw list.
+        let lighting = self
+            .lighting
+            .unwrap_or_else(|| Self::default_lighting(view, &ellipsoid));
+        let tiles: Vec<TileKey> = self.selection.draw.iter().map(|d| d.key).collect();
+        let draw = self.renderer.prepare(
+            &self.device,
+            &self.queue,
+            &FrameInputs {
+                camera: &camera,
+                eye_height_m: eye.height_m,
+                eye_up: ellipsoid.geodetic_normal_from_lon_lat(eye.lon_rad, eye.lat_rad),
+                planet_radius_m: ellipsoid.mean_radius(),
+                lighting,
+                tiles: &tiles,
+            },
+        );
+        FrameReport {
+            selection: self.selection.stats,
+            select_us,
+            select_cpu_us,
+            wanted: self.selection.requests.len() as u32,
+            layer: layer_stats,
+            pool: self.renderer.pool().stats(),
+            draw,
+            sse_bound_px: self.selection_options.max_sse_px,
+            requests_deferred: self.plan.deferred,
+            colours_pending: residency.colours_pending,
+        }
+    }
+
+    /// When the GPU pool or the CPU cache cannot hold what the view needs, raise the error
+    /// bound (less detail) instead of thrashing or growing; relax it again when there is
+    /// room (unless relaxing is off, as for offline frames, which must settle).
+    fn adapt_detail(&mut self, budget_bound: bool) {
+        let capacity = f64::from(self.renderer.pool().capacity());
+        // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
+        let needed = self.selection.draw.len() as f64 * 4.0 / 3.0;
+        let sse = &mut self.selection_options.max_sse_px;
+        if needed > capacity * 0.9 || budget_bound {
+            *sse *= 1.25;
+        } else if self.relax_detail && needed < capacity * 0.6 && *sse > self.settings.max_sse_px {
+            *sse = (*sse / 1.1).max(self.settings.max_sse_px);
+        }
+    }
+
+    /// Records the frame prepared by [`Globe::update`] into `encoder`, drawing into `colour`
+    /// (of the format the globe was built for, the size of the view): the terrain, then each
+    /// pass of `overlays` in order ([`crate::overlay`]). The depth and id buffers are the
+    /// globe's, kept for [`Globe::pick`].
+    pub fn render(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        colour: &wgpu::TextureView,
+        overlays: &mut [&mut dyn Overlay],
+    ) {
+        let Some(camera) = self.camera else {
+            return;
+        };
+        let (w, h) = camera.viewport_px();
+        if self.targets.as_ref().is_none_or(|t| t.size() != (w, h)) {
+            self.targets = Some(FrameTargets::new(&self.device, w, h));
+        }
+        let Some(targets) = self.targets.as_ref() else {
+            return;
+        };
+        let frame = FrameContext {
+            device: &self.device,
+            queue: &self.queue,
+            camera: &camera,
+            formats: self.formats,
+            ellipsoid: *self.layer.ellipsoid(),
+            exaggeration: self.settings.exaggeration,
+        };
+        for o in overlays.iter_mut() {
+            o.prepare(&frame);
+        }
+        {
+            let mut pass = begin_pass(encoder, "terrain", colour, targets, true, true);
+            self.renderer.draw(&mut pass);
+        }
+        let draws_in = |p: OverlayPass| overlays.iter().any(|o| o.passes().contains(&p));
+        if draws_in(OverlayPass::World) || draws_in(OverlayPass::ScreenAligned) {
+            let mut pass = begin_pass(encoder, "world overlays", colour, targets, true, false);
+            for p in [OverlayPass::World, OverlayPass::ScreenAligned] {
+                for o in overlays.iter().filter(|o| o.passes().contains(&p)) {
+                    o.draw(p, &frame, &mut pass);
+                }
+            }
+        }
+        if draws_in(OverlayPass::Screen) {
+            let mut pass = begin_pass(encoder, "screen overlays", colour, targets, false, false);
+            for o in overlays
+                .iter()
+                .filter(|o| o.passes().contains(&OverlayPass::Screen))
+            {
+                o.draw(OverlayPass::Screen, &frame, &mut pass);
+            }
+        }
+        self.drawn_camera = Some(camera);
+    }
+
+    /// What is under pixel (`x_px`, `y_px`) of the last rendered frame (`x` right, `y` down
+    /// from the top-left corner): the id an overlay wrote there, and the terrain point (from
+    /// the depth buffer where terrain is in front, refined against the loaded terrain; a ray
+    /// pick against the loaded terrain where an overlay covers it). Waits for the GPU. `None`
+    /// before any frame was rendered or outside the frame.
+    pub fn pick(&self, x_px: f64, y_px: f64) -> Result<Option<Pick>, EngineError> {
+        let (Some(camera), Some(targets)) = (self.drawn_camera, self.targets.as_ref()) else {
+            return Ok(None);
+        };
+        if !(x_px >= 0.0 && y_px >= 0.0) {
+            return Ok(None);
+        }
+        let Some(read) = targets.read_pixel(&self.device, &self.queue, x_px as u32, y_px as u32)?
+        else {
+            return Ok(None);
+        };
+        let object = (read.id != 0).then_some(read.id);
+        let origin = camera.origin();
+        let dir = camera.ray_direction(x_px, y_px);
+        let from_depth = camera.unproject(x_px, y_px, f64::from(read.depth));
+        let surface = match (object, from_depth) {
+            // Terrain in front: its depth, refined against the loaded heights.
+            (None, Some(p)) => {
+                let t0 = (p - origin).length();
+                let margin = (t0 * 0.02).max(5.0);
+                let refined = query::refine_hit(
+                    self.layer.ellipsoid(),
+                    |lon, lat| self.drawn_height_loaded(lon, lat),
+                    origin,
+                    dir,
+                    t0,
+                    margin,
+                );
+                Some(refined.unwrap_or(p))
+            }
+            (None, None) => None,
+            // An overlay in front: the terrain behind it.
+            (Some(_), _) => self.ray_pick(origin, dir),
+        };
+        Ok(Some(Pick { surface, object }))
+    }
+
+    /// Frames until everything the selection wants is loaded and resident, imagery included
+    /// (or `timeout`). Returns the last frame's report and whether it completed.
+    pub fn load_completely(&mut self, view: &View, timeout: Duration) -> (FrameReport, bool) {
+        let deadline = Instant::now() + timeout;
+        self.set_uploads_per_frame(u32::MAX);
+        // Start from the configured bound and only raise it if budgets force it, so the same
+        // view always settles on the same tiles.
+        self.selection_options.max_sse_px = self.settings.max_sse_px;
+        self.relax_detail = false;
+        let mut stalled = 0;
+        loop {
+            let sse_before = self.selection_options.max_sse_px;
+            let report = self.update(view);
+            if report.is_complete() {
+                return (report, true);
+            }
+            if Instant::now() > deadline {
+                return (report, false);
+            }
+            let progress = report.pool.uploaded_this_frame > 0 || report.sse_bound_px != sse_before;
+            // Wait for tiles only if nothing could be uploaded this frame.
+            if !progress {
+                let idle = self.layer.loading() == 0 && self.layer.colours_loading() == 0;
+                if idle && report.layer.arrived == 0 && report.layer.colours_arrived == 0 {
+                    stalled += 1;
+                    if stalled > 3 {
+                        return (report, false);
+                    }
+                }
+                self.layer.wait_for_tiles(Duration::from_millis(200));
+            } else {
+                stalled = 0;
+            }
+        }
+    }
+}
+
+/// The ECEF point of a geodetic position with its height raised by `exaggeration`.
+pub(crate) fn exaggerated(ellipsoid: &Ellipsoid, exaggeration: f64, at: Cartographic) -> DVec3 {
+    ellipsoid.cartographic_to_ecef(Cartographic {
+        height_m: at.height_m * exaggeration,
+        ..at
+    })
+}
+
+/// Begins a pass over `colour`, the id buffer and (if `depth`) the depth buffer, clearing
+/// them (`clear`) or loading what earlier passes drew.
+fn begin_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    colour: &wgpu::TextureView,
+    targets: &FrameTargets,
+    depth: bool,
+    clear: bool,
+) -> wgpu::RenderPass<'e> {
+    let ops = |clear_to| wgpu::Operations {
+        load: if clear {
+            wgpu::LoadOp::Clear(clear_to)
+        } else {
+            wgpu::LoadOp::Load
+        },
+        store: wgpu::StoreOp::Store,
+    };
+    let attachment = |view, clear_to| {
+        Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: ops(clear_to),
+        })
+    };
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[
+            attachment(colour, wgpu::Color::BLACK),
+            attachment(targets.id_view(), wgpu::Color::TRANSPARENT),
+        ],
+        depth_stencil_attachment: depth.then(|| wgpu::RenderPassDepthStencilAttachment {
+            view: targets.depth_view(),
+            // Reversed-Z: 0 is infinitely far.
+            depth_ops: Some(wgpu::Operations {
+                load: if clear {
+                    wgpu::LoadOp::Clear(0.0)
+                } else {
+                    wgpu::LoadOp::Load
+                },
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}

@@ -1,0 +1,151 @@
+//! [`Headless`]: a globe rendering without a window (`globus render`, `globus bench`,
+//! tests, server-side pictures), read back as RGBA.
+
+use std::time::{Duration, Instant};
+
+use globus_geo::{Ellipsoid, View};
+use globus_render::{GpuContext, OffscreenTarget, RgbaImage};
+
+use crate::overlay::Overlay;
+use crate::{EngineError, FrameReport, Globe, GlobeBuilder};
+
+/// A GPU context without a window, a globe and an offscreen colour target.
+pub struct Headless {
+    gpu: GpuContext,
+    globe: Globe,
+    target: OffscreenTarget,
+}
+
+/// One complete frame and how it was made.
+pub struct RenderedFrame {
+    /// The pixels (alpha: 255 where terrain or an opaque overlay was drawn, 0 background).
+    pub image: RgbaImage,
+    /// The final frame's report.
+    pub report: FrameReport,
+    /// Milliseconds spent waiting for tiles to load and upload.
+    pub load_ms: f64,
+    /// Whether every wanted tile was loaded before the timeout.
+    pub complete: bool,
+}
+
+impl Headless {
+    /// The best adapter there is (a GPU, else a software rasteriser such as lavapipe), the
+    /// globe `builder` describes and a `width` x `height` target.
+    pub fn new(builder: &GlobeBuilder, width: u32, height: u32) -> Result<Self, EngineError> {
+        // Sources first: one that cannot be opened fails before a GPU context exists.
+        let mut builder = builder.clone();
+        builder.open_sources()?.viewport(width, height);
+        let gpu = GpuContext::headless()?;
+        // The target before the globe: a memory budget counts it in the process's footprint.
+        let target = OffscreenTarget::new(&gpu.device, width, height);
+        let globe = builder.build(&gpu, OffscreenTarget::FORMAT)?;
+        Ok(Self { gpu, globe, target })
+    }
+
+    /// The globe.
+    pub fn globe(&self) -> &Globe {
+        &self.globe
+    }
+
+    /// The globe, to update and configure.
+    pub fn globe_mut(&mut self) -> &mut Globe {
+        &mut self.globe
+    }
+
+    /// The GPU context.
+    pub fn gpu(&self) -> &GpuContext {
+        &self.gpu
+    }
+
+    /// Width and height of the frames, pixels.
+    pub fn size(&self) -> (u32, u32) {
+        self.target.size()
+    }
+
+    /// Runs one frame's CPU work for `view` ([`Globe::update`]).
+    pub fn update(&mut self, view: &View) -> FrameReport {
+        self.globe.update(view)
+    }
+
+    /// Loads everything `view` needs (up to `timeout`), then renders with `overlays` and
+    /// reads the picture back.
+    pub fn render_complete(
+        &mut self,
+        view: &View,
+        timeout: Duration,
+        overlays: &mut [&mut dyn Overlay],
+    ) -> Result<RenderedFrame, EngineError> {
+        let started = Instant::now();
+        let (_, complete) = self.globe.load_completely(view, timeout);
+        let load_ms = started.elapsed().as_secs_f64() * 1e3;
+        // A final frame on the complete data, timed on its own.
+        let report = self.globe.update(view);
+        let image = self.draw_and_read(overlays)?;
+        Ok(RenderedFrame {
+            image,
+            report,
+            load_ms,
+            complete,
+        })
+    }
+
+    /// Draws the frame prepared last and waits for the GPU (no readback).
+    pub fn draw(&mut self, overlays: &mut [&mut dyn Overlay]) {
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
+        self.globe
+            .render(&mut encoder, self.target.view(), overlays);
+        self.gpu.queue.submit([encoder.finish()]);
+        let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+
+    /// Submits the uploads of the frame prepared last without drawing it.
+    pub fn submit_uploads(&self) {
+        self.gpu.queue.submit([]);
+    }
+
+    /// Draws the frame prepared last and reads it back.
+    pub fn draw_and_read(
+        &mut self,
+        overlays: &mut [&mut dyn Overlay],
+    ) -> Result<RgbaImage, EngineError> {
+        self.draw(overlays);
+        Ok(self.target.read_back(&self.gpu.device, &self.gpu.queue)?)
+    }
+}
+
+/// Writes an image as PNG with alpha forced opaque.
+pub fn save_png(image: &RgbaImage, path: &std::path::Path) -> Result<(), std::io::Error> {
+    let mut px = image.pixels.clone();
+    px.chunks_exact_mut(4).for_each(|p| p[3] = 255);
+    image::save_buffer(
+        path,
+        &px,
+        image.width,
+        image.height,
+        image::ColorType::Rgba8,
+    )
+    .map_err(|e| std::io::Error::other(format!("cannot write {}: {e}", path.display())))
+}
+
+/// Pixels whose centre ray hits `body`, and how many of those show no terrain (alpha below
+/// 255): the holes a viewer would see inside the planet's silhouette.
+pub fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32) {
+    let (mut inside, mut holes) = (0, 0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(view.position, dir).is_some() {
+                inside += 1;
+                if img.pixels[((y * img.width + x) * 4 + 3) as usize] != 255 {
+                    holes += 1;
+                }
+            }
+        }
+    }
+    (inside, holes)
+}

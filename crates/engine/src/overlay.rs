@@ -1,0 +1,117 @@
+//! [`Overlay`]: how an application (and the engine's built-in layers) draws over the terrain.
+//!
+//! A frame is drawn in passes, in this order, into one colour target, one id buffer and (but
+//! for the last) one depth buffer, which the terrain leaves behind (Kaiser 2018, 5.3):
+//!
+//! | pass | what | depth |
+//! |---|---|---|
+//! | terrain | sky and tiles (the engine's own) | cleared, written |
+//! | [`OverlayPass::World`] | vector data, volumes, models: camera-relative like the tiles | tested and written as the overlay likes |
+//! | [`OverlayPass::ScreenAligned`] | billboards, labels: anchored in the world, facing the screen, a size in pixels | tested against everything before (hidden behind terrain) |
+//! | [`OverlayPass::Screen`] | HUD: pixel coordinates | none |
+//!
+//! Each frame the engine calls [`Overlay::prepare`] on every overlay (on the render thread,
+//! with the device, queue and the frame's [`FrameCamera`]), then [`Overlay::draw`] once per
+//! pass the overlay draws in ([`Overlay::passes`]), recording into a render pass the engine
+//! began. Pipelines declare the frame's targets through [`FrameFormats`]: colour at location
+//! 0, the id buffer at location 1 (write non-zero object ids there to be pickable, see
+//! [`crate::Globe::pick`]), and the shared depth buffer (reversed-Z: nearer is greater) in
+//! the world and screen-aligned passes. Positions reach shaders relative to
+//! [`FrameCamera::origin`] ([`FrameCamera::relative`]: subtracted in f64), and with
+//! [`FrameCamera::clip_from_eye`] they land exactly where the terrain under them is drawn.
+
+use globus_geo::{Cartographic, DVec3, Ellipsoid};
+use globus_render::{FrameCamera, FrameFormats};
+
+/// One of the passes overlays draw in, in drawing order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum OverlayPass {
+    /// World space, depth-tested against the terrain: lines, polygons, volumes, models.
+    World,
+    /// Anchored in the world and facing the screen (billboards, labels), depth-tested
+    /// against the terrain and the world pass so terrain hides them where it should.
+    ScreenAligned,
+    /// Screen space, no depth buffer: heads-up displays.
+    Screen,
+}
+
+impl OverlayPass {
+    /// Every pass, in drawing order.
+    pub const ALL: [OverlayPass; 3] = [Self::World, Self::ScreenAligned, Self::Screen];
+
+    /// Whether the pass has the depth buffer attached (pipelines drawing in it must then
+    /// declare [`FrameFormats::depth_test`], and must not in the others).
+    pub fn has_depth(self) -> bool {
+        !matches!(self, Self::Screen)
+    }
+}
+
+/// What an overlay gets every frame: the GPU, the frame's camera and targets, and the body
+/// with its elevation exaggeration (everything placed at an altitude is raised by it, as the
+/// terrain is).
+pub struct FrameContext<'a> {
+    pub(crate) device: &'a wgpu::Device,
+    pub(crate) queue: &'a wgpu::Queue,
+    pub(crate) camera: &'a FrameCamera,
+    pub(crate) formats: FrameFormats,
+    pub(crate) ellipsoid: Ellipsoid,
+    pub(crate) exaggeration: f64,
+}
+
+impl FrameContext<'_> {
+    /// The device (create pipelines and buffers with it).
+    pub fn device(&self) -> &wgpu::Device {
+        self.device
+    }
+
+    /// The queue (write buffers with it; the engine submits).
+    pub fn queue(&self) -> &wgpu::Queue {
+        self.queue
+    }
+
+    /// The frame's camera.
+    pub fn camera(&self) -> &FrameCamera {
+        self.camera
+    }
+
+    /// The formats of the frame's targets.
+    pub fn formats(&self) -> FrameFormats {
+        self.formats
+    }
+
+    /// The body the globe is on.
+    pub fn ellipsoid(&self) -> &Ellipsoid {
+        &self.ellipsoid
+    }
+
+    /// The globe's elevation exaggeration.
+    pub fn exaggeration(&self) -> f64 {
+        self.exaggeration
+    }
+
+    /// The ECEF point drawn for a geodetic position: its height above the ellipsoid raised
+    /// by the exaggeration, as the terrain's is (see [`crate::Globe::world_position`]).
+    pub fn world_position(&self, at: Cartographic) -> DVec3 {
+        crate::globe::exaggerated(&self.ellipsoid, self.exaggeration, at)
+    }
+}
+
+/// Something drawn over the terrain. See the module documentation for the passes and the
+/// conventions pipelines follow.
+pub trait Overlay {
+    /// The passes this overlay draws in.
+    fn passes(&self) -> &[OverlayPass];
+
+    /// Called once a frame before any pass is recorded: update buffers for this frame's
+    /// camera, create pipelines the first time.
+    fn prepare(&mut self, frame: &FrameContext<'_>);
+
+    /// Records this overlay's draws for `pass` into `render_pass` (called once per pass in
+    /// [`Overlay::passes`], after every overlay was prepared).
+    fn draw(
+        &self,
+        pass: OverlayPass,
+        frame: &FrameContext<'_>,
+        render_pass: &mut wgpu::RenderPass<'_>,
+    );
+}
