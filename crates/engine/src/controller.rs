@@ -75,13 +75,16 @@ const MAX_DISTANCE_M: f64 = 1.0e8;
 /// Inspection orbits keep the camera between these elevations above the pivot's horizon.
 const MIN_ORBIT_ELEVATION_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 const MAX_ORBIT_ELEVATION_RAD: f64 = 89.5 * std::f64::consts::PI / 180.0;
-/// Look-around never tilts closer than this to straight up or down (cosine).
-const MAX_LOOK_COS: f64 = 0.999;
+/// Look-around never tilts closer than this to straight up or down.
+const MAX_LOOK_PITCH_RAD: f64 = 87.5 * std::f64::consts::PI / 180.0;
 
 #[derive(Clone, Copy, Debug)]
 struct Grab {
     point: DVec3,
     radius: f64,
+    /// The camera when the point was grabbed: every pan position is a rotation of it, so a
+    /// drag that comes back to where it started puts the camera back where it was.
+    start: View,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -166,32 +169,40 @@ impl CameraController {
         self.grab = self.ground_under(ground, x_px, y_px).map(|point| Grab {
             point,
             radius: point.length(),
+            start: self.view,
         });
         self.grab.is_some()
     }
 
-    /// Moves the camera so the grabbed point is under the cursor at (`x_px`, `y_px`). Where
-    /// the cursor is off the grabbed point's sphere (above the horizon) the camera stays.
+    /// Moves the camera so the grabbed point is under the cursor at (`x_px`, `y_px`): the
+    /// camera at the grab turned about the centre by the rotation that takes the point its
+    /// ray through the cursor meets on the grabbed point's sphere to the grabbed point (the
+    /// rotated ray then meets the grabbed point). Where that ray misses the sphere (the cursor
+    /// beyond the horizon the camera had) the camera stays.
     pub fn pan_to(&mut self, ground: &impl Ground, x_px: f64, y_px: f64) {
         let Some(grab) = self.grab else {
             return;
         };
-        let dir = self.view.ray_direction(x_px, y_px);
-        let Some((t, _)) = Ellipsoid::sphere(grab.radius).intersect_ray(self.view.position, dir)
-        else {
+        let start = View {
+            width_px: self.view.width_px,
+            height_px: self.view.height_px,
+            ..grab.start
+        };
+        let dir = start.ray_direction(x_px, y_px);
+        let Some((t, _)) = Ellipsoid::sphere(grab.radius).intersect_ray(start.position, dir) else {
             return;
         };
         if t <= 0.0 {
             return;
         }
-        let under_cursor = self.view.position + dir * t;
+        let under_cursor = start.position + dir * t;
         let (Some(from), Some(to)) = (under_cursor.try_normalize(), grab.point.try_normalize())
         else {
             return;
         };
         let q = DQuat::from_rotation_arc(from, to);
-        self.view.position = q * self.view.position;
-        self.view.orientation = (q * self.view.orientation).normalize();
+        self.view.position = q * start.position;
+        self.view.orientation = (q * start.orientation).normalize();
         self.keep_above_ground(ground);
     }
 
@@ -252,14 +263,13 @@ impl CameraController {
             .geodetic_normal(self.view.position)
             .unwrap_or(DVec3::Z);
         let turn = DQuat::from_axis_angle(up, -dx_px * per_px);
-        let tilt = DQuat::from_axis_angle(self.view.right(), -dy_px * per_px);
-        let candidate = (turn * tilt * self.view.orientation).normalize();
-        let forward = candidate * DVec3::NEG_Z;
-        self.view.orientation = if forward.dot(up).abs() < MAX_LOOK_COS {
-            candidate
-        } else {
-            (turn * self.view.orientation).normalize()
-        };
+        // Tilt, stopping short of straight up or down.
+        let pitch = self.view.forward().dot(up).clamp(-1.0, 1.0).asin();
+        let limit = MAX_LOOK_PITCH_RAD;
+        // (Never further past the limit than the camera already is.)
+        let tilt = (pitch - dy_px * per_px).clamp((-limit).min(pitch), limit.max(pitch)) - pitch;
+        let tilt = DQuat::from_axis_angle(self.view.right(), tilt);
+        self.view.orientation = (turn * tilt * self.view.orientation).normalize();
     }
 
     /// Picks the ground point under the cursor as the inspection point to orbit about;
@@ -270,9 +280,10 @@ impl CameraController {
         self.orbit.is_some()
     }
 
-    /// Orbits about the inspection point: `dx_px` about its vertical, `dy_px` up and down
-    /// about the camera's right axis (`radians_per_px` each), clamped (see the module
-    /// documentation). The inspection point keeps its place on the screen.
+    /// Orbits about the inspection point: `dx_px` about its vertical (the view turns with the
+    /// cursor), `dy_px` about the camera's right axis (`radians_per_px` each; dragging down
+    /// raises the camera over the point, up lowers it towards the horizon), clamped (see the
+    /// module documentation). The inspection point keeps its place on the screen.
     pub fn orbit_by(&mut self, ground: &impl Ground, dx_px: f64, dy_px: f64, radians_per_px: f64) {
         let Some(pivot) = self.orbit else {
             return;
@@ -284,11 +295,12 @@ impl CameraController {
             orientation: (q * view.orientation).normalize(),
             ..*view
         };
-        // Horizontally about the vector from the centre to the point (Kaiser 4.4.4).
-        let axis = pivot.try_normalize().unwrap_or(up);
+        // Horizontally about the point's vertical (Kaiser 4.4.4 turns about the direction
+        // from the centre, which differs from the vertical by up to 0.19 degrees on WGS84 and
+        // would move the camera's elevation as it turns).
         let turned = about_pivot(
             &self.view,
-            DQuat::from_axis_angle(axis, -dx_px * radians_per_px),
+            DQuat::from_axis_angle(up, -dx_px * radians_per_px),
         );
         if self.orbit_allowed(ground, &turned, pivot, up) {
             self.view = turned;

@@ -26,7 +26,7 @@ use globus_render::{
     Lighting, NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
 };
 use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
-use globus_tiling::{Selection, SelectionOptions, SelectionStats, TileKey, select_into};
+use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, TileKey, select_into};
 
 use crate::builder::Settings;
 use crate::frame::plan::{FramePlan, Motion};
@@ -251,6 +251,11 @@ impl Globe {
     /// projection of world points to pixels.
     pub fn camera(&self) -> Option<&FrameCamera> {
         self.camera.as_ref()
+    }
+
+    /// The tiles the last [`Globe::update`] drew, with their screen-space errors.
+    pub fn drawn_tiles(&self) -> &[DrawTile] {
+        &self.selection.draw
     }
 
     /// The data layer (scheduler, cache and counters).

@@ -74,7 +74,7 @@ pub use error::EngineError;
 pub use globe::{FrameReport, Globe, MemoryUse, Pick};
 pub use headless::{Headless, RenderedFrame, holes_inside, save_png};
 pub use overlay::{FrameContext, Overlay, OverlayPass};
-pub use query::TerrainHeight;
+pub use query::{TerrainHeight, ray_march};
 
 pub use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
 pub use globus_render::{
@@ -82,3 +82,4 @@ pub use globus_render::{
 };
 pub use globus_stream::open::SourceSpec;
 pub use globus_stream::{LayerStats, SchedulerStats, TerrainLayer, TerrainSource};
+pub use globus_tiling::{DrawTile, TileKey};

@@ -154,10 +154,12 @@ pub(crate) fn normal_at(
     )
 }
 
-/// The first point where a ray meets a surface of drawn heights `ground(lon, lat)` metres
-/// above `ellipsoid` (`None` where the surface is unknown: treated as `lowest_m`), the
-/// surface lying between `lowest_m` and `highest_m`. `None` if it misses.
-pub(crate) fn ray_march(
+/// The first point where a ray meets a surface of heights `ground(lon, lat)` metres above
+/// `ellipsoid` (radians; `None` where the surface is unknown: treated as `lowest_m`), the
+/// surface lying between `lowest_m` and `highest_m`. `None` if it misses. What
+/// [`crate::Globe::ray_pick`] does on the loaded terrain; for [`crate::Ground`]s of one's
+/// own.
+pub fn ray_march(
     ellipsoid: &Ellipsoid,
     ground: impl Fn(f64, f64) -> Option<f64>,
     (lowest_m, highest_m): (f64, f64),
