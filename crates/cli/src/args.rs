@@ -84,7 +84,7 @@ pub struct GlobeArgs {
     pub mesh_error: f64,
     /// Elevation exaggeration: draw heights this many times their value (terrain, bounds
     /// and culling follow; 1 is true heights).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub exaggeration: Option<f64>,
     /// Treat the planet's data as ending at this level and invent every deeper tile by
     /// procedural refinement (a stand-in for real data that ends, like 90 m SRTM).

@@ -10,6 +10,7 @@
 //! workers = 16              # loader threads (also the most requests in flight)
 //! refine_to_level = 22      # procedural detail below the data, down to this level
 //! request_lookahead_frames = 3  # a moving camera skips tiles it leaves within 3 frames
+//! exaggeration = 1          # elevation exaggeration of terrain and everything at an altitude
 //!
 //! [http]
 //! user_agent = "my-app/1.0 (me@example.org)"
@@ -62,6 +63,8 @@ pub struct Config {
     /// Frames ahead a moving camera's requests look
     /// ([`GlobeBuilder::request_lookahead_frames`]).
     pub request_lookahead_frames: Option<f64>,
+    /// Elevation exaggeration.
+    pub exaggeration: Option<f64>,
     /// HTTP settings.
     pub http: Option<HttpConfig>,
     /// On-disk tile cache.
@@ -154,6 +157,11 @@ impl Config {
         {
             bail!("request_lookahead_frames = {f} must be from 0 to 1000 frames");
         }
+        if let Some(e) = self.exaggeration
+            && !(0.0..=1000.0).contains(&e)
+        {
+            bail!("exaggeration = {e} must be a factor from 0 to 1000");
+        }
         if let Some(d) = &self.disk_cache
             && d.max_mb == Some(0)
         {
@@ -200,6 +208,9 @@ impl Config {
         }
         if let Some(f) = self.request_lookahead_frames {
             builder.request_lookahead_frames(f);
+        }
+        if let Some(e) = self.exaggeration {
+            builder.exaggeration(e);
         }
         if let Some(h) = &self.http {
             let mut http = builder.http_options().clone();
@@ -252,6 +263,7 @@ mod tests {
             workers = 12
             refine_to_level = 22
             request_lookahead_frames = 0
+            exaggeration = 5
             [http]
             user_agent = "test/1"
             per_host = 4
@@ -282,6 +294,7 @@ mod tests {
             (512, 12, 22)
         );
         assert_eq!(o.lookahead_frames(), 0.0);
+        assert_eq!(o.exaggeration_factor(), 5.0);
         let http = o.http_options();
         assert_eq!(http.user_agent, "test/1");
         assert_eq!(http.per_host, 4);
@@ -312,6 +325,8 @@ mod tests {
             "refine_to_level = 40",
             "request_lookahead_frames = -1",
             "request_lookahead_frames = nan",
+            "exaggeration = -1",
+            "exaggeration = 1e9",
             "memory_mb = 0",
             "memory_mb = 512\ncache_mb = 256",
             "memory_mb = 512\ngpu_tiles = 256",

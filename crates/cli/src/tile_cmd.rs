@@ -1,5 +1,6 @@
 //! `globus tile dem|imagery|plan|merge`: builds tile pyramids with `globus-tiler`.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
@@ -161,18 +162,57 @@ pub fn plan(shards: u32, kind: &str, a: &TileArgs) -> anyhow::Result<String> {
 
 /// Runs `globus tile merge` and returns the JSON summary line.
 pub fn merge(a: &MergeArgs) -> anyhow::Result<String> {
-    let summary = globus_tiler::shard::merge(&MergeJob {
-        inputs: a.inputs.clone(),
-        output: a.out.clone(),
-        force: a.force,
-        threads: a.threads.unwrap_or(0),
-    })?;
+    let bar = ProgressBar::new();
+    let summary = globus_tiler::shard::merge_with_progress(
+        &MergeJob {
+            inputs: a.inputs.clone(),
+            output: a.out.clone(),
+            force: a.force,
+            threads: a.threads.unwrap_or(0),
+        },
+        &|p| bar.update(p),
+    )?;
+    bar.finish();
     Ok(summary.to_json().to_string())
 }
 
 /// Runs `globus tile dem|imagery` and returns the JSON summary line.
 pub fn run(kind: &str, a: &TileArgs) -> anyhow::Result<String> {
     let job = job(kind, a)?;
-    let summary = globus_tiler::run(&job)?;
+    let bar = ProgressBar::new();
+    let summary = globus_tiler::run_with_progress(&job, &|p| bar.update(p))?;
+    bar.finish();
     Ok(summary.to_json().to_string())
+}
+
+/// Tiles done, rate and time left, drawn on stderr while a job runs, if stderr is a
+/// terminal (nothing otherwise).
+struct ProgressBar(Option<indicatif::ProgressBar>);
+
+impl ProgressBar {
+    fn new() -> Self {
+        if !std::io::stderr().is_terminal() {
+            return Self(None);
+        }
+        let bar = indicatif::ProgressBar::new(0);
+        let style = indicatif::ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} tiles ({percent}%)  {per_sec}  ETA {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+        bar.set_style(style);
+        Self(Some(bar))
+    }
+
+    fn update(&self, p: &globus_tiler::ProgressReport) {
+        if let Some(bar) = &self.0 {
+            bar.set_length(p.tiles_total);
+            bar.set_position(p.tiles_done);
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.0 {
+            bar.finish_and_clear();
+        }
+    }
 }

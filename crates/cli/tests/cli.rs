@@ -154,6 +154,10 @@ fn bad_arguments_end_with_one_clear_line() {
             "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --terrain ./x --refine-below 5",
             "--refine-below",
         ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --exaggeration -2",
+            "--exaggeration",
+        ),
     ];
     for (args, needle) in cases {
         let args: Vec<&str> = args
@@ -212,5 +216,11 @@ fn render_writes_a_png_and_stats() {
     assert!(s["tiles_rendered"].as_u64().unwrap() > 0);
     assert!(s["draw_calls"].as_u64().unwrap() <= 10);
     assert_eq!(s["complete"], true);
+    // A run that succeeds says nothing on stderr: logs are warnings and errors only.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !stderr.contains("WARN") && !stderr.contains("ERROR"),
+        "a successful render logged: {stderr}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,6 +1,5 @@
 //! [`TileJob`]: everything `globus tile dem|imagery` asks for, checked, run, summarised.
 
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -13,7 +12,7 @@ use crate::fill::fill_voids;
 use crate::format::ImageFormat;
 use crate::input;
 use crate::layer::{ElevationCodec, ElevationLayer, ImageryCodec, ImageryLayer, Layer, TileCodec};
-use crate::pyramid::{Handover, Progress, Pyramid, report_progress};
+use crate::pyramid::{Handover, Progress, ProgressFn, Pyramid, report_progress};
 use crate::raster::{RowSource, intersect};
 use crate::resample::SampleGrid;
 use crate::shard::{self, ShardSpec};
@@ -300,9 +299,13 @@ fn native_level(
         .unwrap_or(24)
 }
 
-/// Runs `pyramid` on a pool of `threads` workers (0: all cores), with a progress line on a
-/// terminal.
-pub(crate) fn run_pyramid<L: Layer>(pyramid: &Pyramid<'_, L>, threads: usize) -> Result<()> {
+/// Runs `pyramid` on a pool of `threads` workers (0: all cores), reporting progress to
+/// `on_progress`.
+pub(crate) fn run_pyramid<L: Layer>(
+    pyramid: &Pyramid<'_, L>,
+    threads: usize,
+    on_progress: &ProgressFn<'_>,
+) -> Result<()> {
     let start = Instant::now();
     let progress = pyramid.progress;
     progress.total.store(pyramid.count(), Ordering::Relaxed);
@@ -313,9 +316,7 @@ pub(crate) fn run_pyramid<L: Layer>(pyramid: &Pyramid<'_, L>, threads: usize) ->
         .map_err(|e| TilerError::BadOptions(format!("--threads {threads}: {e}")))?;
     let done = AtomicBool::new(false);
     std::thread::scope(|s| {
-        if std::io::stderr().is_terminal() {
-            s.spawn(|| report_progress(progress, &done, start));
-        }
+        s.spawn(|| report_progress(progress, &done, start, on_progress));
         let r = pool.install(|| pyramid.run());
         done.store(true, Ordering::Relaxed);
         r
@@ -331,7 +332,11 @@ struct Prepared<L> {
     voids_filled: usize,
 }
 
-fn execute<L: Layer>(job: &TileJob, p: &Prepared<L>) -> Result<Summary> {
+fn execute<L: Layer>(
+    job: &TileJob,
+    p: &Prepared<L>,
+    on_progress: &ProgressFn<'_>,
+) -> Result<Summary> {
     let start = Instant::now();
     let codec = p.layer.codec();
     let closed = codec.grid() == SampleGrid::Corners;
@@ -379,7 +384,7 @@ fn execute<L: Layer>(job: &TileJob, p: &Prepared<L>) -> Result<Summary> {
         handover: split.map(|l| (l, &handover)),
         progress: &progress,
     };
-    run_pyramid(&pyramid, job.threads.unwrap_or(0))?;
+    run_pyramid(&pyramid, job.threads.unwrap_or(0), on_progress)?;
     sink.finish(&p.meta)?;
     if let (Some(spec), Some(split_level)) = (job.shard, split) {
         let tiles = handover
@@ -582,13 +587,23 @@ fn prepare_imagery(job: &TileJob, format: ImageFormat) -> Result<Prepared<Imager
 
 /// Runs a job (or, with [`TileJob::shard`], one shard of it).
 pub fn run(job: &TileJob) -> Result<Summary> {
+    run_with_progress(job, &|_| {})
+}
+
+/// Runs a job, calling `on_progress` a few times a second with the tiles done so far (a
+/// terminal program draws a progress bar from it; the library prints nothing).
+pub fn run_with_progress(job: &TileJob, on_progress: &ProgressFn<'_>) -> Result<Summary> {
     check_job(job)?;
     match job.kind {
         JobKind::Dem {
             encoding,
             height_scale,
-        } => execute(job, &prepare_elevation(job, encoding, height_scale)?),
-        JobKind::Imagery { format } => execute(job, &prepare_imagery(job, format)?),
+        } => execute(
+            job,
+            &prepare_elevation(job, encoding, height_scale)?,
+            on_progress,
+        ),
+        JobKind::Imagery { format } => execute(job, &prepare_imagery(job, format)?, on_progress),
     }
 }
 

@@ -35,5 +35,6 @@ pub mod sink;
 pub use encoding::ElevationEncoding;
 pub use error::{Result, TilerError};
 pub use format::ImageFormat;
-pub use job::{JobKind, Summary, TileJob, run};
+pub use job::{JobKind, Summary, TileJob, run, run_with_progress};
+pub use pyramid::{ProgressFn, ProgressReport};
 pub use sink::TileLayout;

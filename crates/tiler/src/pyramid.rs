@@ -89,25 +89,6 @@ pub struct Progress {
     pub total: AtomicU64,
 }
 
-impl Progress {
-    /// One line: tiles done of total, rate and estimated time left.
-    pub fn line(&self, elapsed: Duration) -> String {
-        let done = self.tiles.load(Ordering::Relaxed);
-        let rate = done as f64 / elapsed.as_secs_f64().max(1e-3);
-        let total = self.total.load(Ordering::Relaxed);
-        let left = total.saturating_sub(done) as f64 / rate.max(1e-9);
-        let pct = 100.0 * done as f64 / total.max(1) as f64;
-        format!(
-            "{done}/{total} tiles ({pct:.1}%)  {rate:.0} tiles/s  ETA {}",
-            if done == 0 {
-                "--".to_string()
-            } else {
-                format!("{:.0} s", left)
-            }
-        )
-    }
-}
-
 /// Tiles at a hand-over level, kept raw (exact samples) for building the levels above them
 /// elsewhere: see [`crate::shard`].
 pub type Handover = std::sync::Mutex<Vec<(TileKey, Vec<u8>)>>;
@@ -255,22 +236,47 @@ impl<L: Layer> Pyramid<'_, L> {
     }
 }
 
-/// Prints [`Progress::line`] to stderr every `period` until `done` is set; used only when
-/// stderr is a terminal.
-pub fn report_progress(progress: &Progress, done: &std::sync::atomic::AtomicBool, start: Instant) {
-    use std::io::Write;
+/// Where a job stands, as reported to a progress callback ([`crate::run_with_progress`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressReport {
+    /// Tiles written or found already written.
+    pub tiles_done: u64,
+    /// Tiles the job will make in all.
+    pub tiles_total: u64,
+    /// Bytes written so far.
+    pub bytes: u64,
+    /// Time since the job started.
+    pub elapsed: Duration,
+}
+
+/// What a job calls with its progress: a few times a second while it runs (from a thread of
+/// its own), and once at the end.
+pub type ProgressFn<'a> = dyn Fn(&ProgressReport) + Sync + 'a;
+
+impl Progress {
+    fn report(&self, start: Instant) -> ProgressReport {
+        ProgressReport {
+            tiles_done: self.tiles.load(Ordering::Relaxed),
+            tiles_total: self.total.load(Ordering::Relaxed),
+            bytes: self.bytes.load(Ordering::Relaxed),
+            elapsed: start.elapsed(),
+        }
+    }
+}
+
+/// Calls `on_progress` every quarter second until `done` is set, then once more.
+pub fn report_progress(
+    progress: &Progress,
+    done: &std::sync::atomic::AtomicBool,
+    start: Instant,
+    on_progress: &ProgressFn<'_>,
+) {
     let period = Duration::from_millis(250);
     while !done.load(Ordering::Relaxed) {
         std::thread::sleep(period);
-        let mut err = std::io::stderr().lock();
-        let _ = write!(err, "\r\x1b[K{}", progress.line(start.elapsed()));
-        let _ = err.flush();
+        on_progress(&progress.report(start));
     }
-    let _ = writeln!(
-        std::io::stderr(),
-        "\r\x1b[K{}",
-        progress.line(start.elapsed())
-    );
+    on_progress(&progress.report(start));
 }
 
 #[cfg(test)]

@@ -18,7 +18,7 @@ use crate::error::{Result, TilerError};
 use crate::format::ImageFormat;
 use crate::job::{Summary, run_pyramid};
 use crate::layer::{ElevationCodec, ImageryCodec, Layer, TileCodec};
-use crate::pyramid::{Progress, Pyramid, count_tiles, tile_range};
+use crate::pyramid::{Progress, ProgressFn, Pyramid, count_tiles, tile_range};
 use crate::sink::{OutputOptions, OutputSink, PyramidMetadata, TileLayout};
 
 /// Which shard of how many this process runs.
@@ -464,6 +464,11 @@ pub struct MergeJob {
 
 /// Joins shard outputs into one archive and builds the levels above the hand-over level.
 pub fn merge(job: &MergeJob) -> Result<Summary> {
+    merge_with_progress(job, &|_| {})
+}
+
+/// [`merge`], calling `on_progress` with the levels it builds as it goes.
+pub fn merge_with_progress(job: &MergeJob, on_progress: &ProgressFn<'_>) -> Result<Summary> {
     let start = Instant::now();
     let mut headers: Vec<HandoverHeader> = Vec::new();
     let mut handed: Vec<(TileKey, Vec<u8>)> = Vec::new();
@@ -511,7 +516,13 @@ pub fn merge(job: &MergeJob) -> Result<Summary> {
             let encoding = ElevationEncoding::parse(enc).ok_or_else(|| {
                 TilerError::bad_input(&job.inputs[0], format!("unknown encoding {enc}"))
             })?;
-            merge_with(job, &head, ElevationCodec { size, encoding }, handed, start)
+            merge_with(
+                job,
+                &head,
+                ElevationCodec { size, encoding },
+                (handed, start),
+                on_progress,
+            )
         }
         None => {
             let format = ImageFormat::parse(&head.meta.format, head.jpeg_quality.unwrap_or(85))
@@ -521,7 +532,13 @@ pub fn merge(job: &MergeJob) -> Result<Summary> {
                         format!("unknown format {}", head.meta.format),
                     )
                 })?;
-            merge_with(job, &head, ImageryCodec { size, format }, handed, start)
+            merge_with(
+                job,
+                &head,
+                ImageryCodec { size, format },
+                (handed, start),
+                on_progress,
+            )
         }
     }
 }
@@ -530,8 +547,8 @@ fn merge_with<C: TileCodec>(
     job: &MergeJob,
     head: &HandoverHeader,
     codec: C,
-    handed: Vec<(TileKey, Vec<u8>)>,
-    start: Instant,
+    (handed, start): (Vec<(TileKey, Vec<u8>)>, Instant),
+    on_progress: &ProgressFn<'_>,
 ) -> Result<Summary> {
     let scheme = head.meta.scheme;
     let sink = OutputSink::open(
@@ -573,7 +590,7 @@ fn merge_with<C: TileCodec>(
             handover: None,
             progress: &progress,
         };
-        run_pyramid(&pyramid, job.threads)?;
+        run_pyramid(&pyramid, job.threads, on_progress)?;
     }
     sink.finish(&head.meta)?;
     let built = progress.written.load(std::sync::atomic::Ordering::Relaxed);

@@ -290,3 +290,26 @@ fn webp_and_tms_outputs_hold_the_same_pixels() {
     assert_eq!(meta["layout"], "tms");
     assert_eq!(meta["format"], "webp");
 }
+
+/// The progress callback sees the count grow to the job's total of tiles, from 0 to what it
+/// writes, and the library writes nothing to the terminal itself.
+#[test]
+fn progress_reaches_the_total_through_the_callback() {
+    let dir = fresh("tiler_imagery", "progress");
+    let mut j = job(png(), &bmng(), &dir, TilingScheme::WebMercator);
+    j.max_level = Some(4);
+    let reports = std::sync::Mutex::new(Vec::new());
+    let summary =
+        globus_tiler::run_with_progress(&j, &|p| reports.lock().unwrap().push(*p)).unwrap();
+    let reports = reports.into_inner().unwrap();
+    let last = reports.last().expect("at least the final report");
+    // Levels 0 to 4 of Web Mercator: 1 + 4 + 16 + 64 + 256 tiles.
+    assert_eq!((last.tiles_done, last.tiles_total), (341, 341));
+    assert_eq!(summary.tiles, 341);
+    assert!(last.bytes > 0 && last.bytes == summary.bytes);
+    assert!(
+        reports
+            .windows(2)
+            .all(|w| w[0].tiles_done <= w[1].tiles_done && w[0].elapsed <= w[1].elapsed)
+    );
+}
