@@ -285,24 +285,23 @@ impl GlobeBuilder {
                 LayerKind::Elevation => "terrain",
                 LayerKind::Imagery => "imagery",
             };
-            let fail = |message: String| EngineError::Source {
+            let fail = |error| EngineError::Source {
                 what,
                 url: spec.url.clone(),
-                message,
+                error,
             };
             open_layer(spec, kind, &client, self.disk_cache.as_ref()).map_err(fail)
         };
         let mut elevation = Vec::new();
         for spec in &self.terrain {
             let layer = open(spec, LayerKind::Elevation)?;
-            let pyramid =
-                elevation_pyramid(layer, limits, budgets.per_layer).map_err(|message| {
-                    EngineError::Source {
-                        what: "terrain",
-                        url: spec.url.clone(),
-                        message,
-                    }
-                })?;
+            let pyramid = elevation_pyramid(layer, limits, budgets.per_layer).map_err(|error| {
+                EngineError::Source {
+                    what: "terrain",
+                    url: spec.url.clone(),
+                    error,
+                }
+            })?;
             elevation.push(pyramid);
         }
         let mut imagery = Vec::new();

@@ -5,18 +5,19 @@
 #[derive(Debug, thiserror::Error)]
 pub enum EngineError {
     /// A data source named in the options could not be opened.
-    #[error("{what} {url}: {message}")]
+    #[error("{what} {url}: {error}")]
     Source {
         /// "terrain" or "imagery".
         what: &'static str,
         /// The source's location, as given.
         url: String,
         /// What went wrong.
-        message: String,
+        #[source]
+        error: globus_stream::fetch::OpenError,
     },
     /// The layers opened but cannot be combined into a terrain source.
     #[error("the terrain and imagery layers cannot be combined: {0}")]
-    Layers(String),
+    Layers(#[source] globus_stream::fetch::OpenError),
     /// The memory budget cannot hold the process and a usable cache and pool.
     #[error(
         "a memory budget of {total_mib} MiB is too small: this process already holds \

@@ -45,12 +45,38 @@ impl Rgba {
     }
 }
 
+/// Why tile bytes could not be decoded. The messages name what was expected; the caller
+/// adds the tile and source.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// The bytes are not an image of a format that is read (with the first bytes shown).
+    #[error("{0}")]
+    NotAnImage(String),
+    /// An image declaring more pixels than the limits allow (refused before decoding).
+    #[error(
+        "{format} declares {width} x {height} pixels; at most {max_side} x {max_side} is accepted"
+    )]
+    TooLarge {
+        /// The image format.
+        format: String,
+        /// Declared width.
+        width: u32,
+        /// Declared height.
+        height: u32,
+        /// The largest side accepted.
+        max_side: u32,
+    },
+    /// The image or mesh is corrupt or of the wrong kind for the layer.
+    #[error("{0}")]
+    Corrupt(String),
+}
+
 /// Decodes an image (format from its magic bytes).
-pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> {
+pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, DecodeError> {
     let reader = || {
         image::ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
-            .map_err(|e| format!("cannot read the image: {e}"))
+            .map_err(|e| DecodeError::NotAnImage(format!("cannot read the image: {e}")))
     };
     let r = reader()?;
     let Some(format) = r.format() else {
@@ -65,27 +91,29 @@ pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> 
                 }
             })
             .collect();
-        return Err(format!(
+        return Err(DecodeError::NotAnImage(format!(
             "not an image ({} bytes starting {head:?})",
             bytes.len()
-        ));
+        )));
     };
     if !matches!(
         format,
         image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::WebP
     ) {
-        return Err(format!(
+        return Err(DecodeError::NotAnImage(format!(
             "{format:?} images are not read (PNG, JPEG, WebP are)"
-        ));
+        )));
     }
     let (w, h) = r
         .into_dimensions()
-        .map_err(|e| format!("{format:?} header: {e}"))?;
+        .map_err(|e| DecodeError::Corrupt(format!("{format:?} header: {e}")))?;
     if w == 0 || h == 0 || w > limits.max_side || h > limits.max_side {
-        return Err(format!(
-            "{format:?} declares {w} x {h} pixels; at most {0} x {0} is accepted",
-            limits.max_side
-        ));
+        return Err(DecodeError::TooLarge {
+            format: format!("{format:?}"),
+            width: w,
+            height: h,
+            max_side: limits.max_side,
+        });
     }
     let mut r = reader()?;
     let mut l = image::Limits::default();
@@ -93,7 +121,9 @@ pub fn decode_image(bytes: &[u8], limits: DecodeLimits) -> Result<Rgba, String> 
     l.max_image_height = Some(limits.max_side);
     l.max_alloc = Some(u64::from(limits.max_side).pow(2) * 16);
     r.limits(l);
-    let img = r.decode().map_err(|e| format!("{format:?}: {e}"))?;
+    let img = r
+        .decode()
+        .map_err(|e| DecodeError::Corrupt(format!("{format:?}: {e}")))?;
     let rgba = img.to_rgba8();
     Ok(Rgba {
         width: rgba.width(),
@@ -119,7 +149,7 @@ pub fn decode_elevation(
     bytes: &[u8],
     encoding: ElevationEncoding,
     limits: DecodeLimits,
-) -> Result<HeightImage, String> {
+) -> Result<HeightImage, DecodeError> {
     let img = decode_image(bytes, limits)?;
     let heights_m = img
         .pixels
@@ -146,11 +176,12 @@ pub const QUANTIZED_MESH_GRID: u32 = 129;
 /// Decodes a quantized-mesh-1.0 tile (gzip'd or not) and rasterises its triangles onto a
 /// `side` x `side` corner grid (sample `i` at `i / (side - 1)` of the tile, north row first),
 /// interpolating heights linearly inside each triangle, as the mesh draws them.
-pub fn decode_quantized_mesh(bytes: &[u8], side: u32) -> Result<HeightImage, String> {
+pub fn decode_quantized_mesh(bytes: &[u8], side: u32) -> Result<HeightImage, DecodeError> {
     use globus_terrain::quantized_mesh::QuantizedMesh;
-    let qm = QuantizedMesh::decode(bytes).map_err(|e| format!("quantized-mesh: {e}"))?;
+    let qm = QuantizedMesh::decode(bytes)
+        .map_err(|e| DecodeError::Corrupt(format!("quantized-mesh: {e}")))?;
     if qm.triangle_count() == 0 {
-        return Err("quantized-mesh: no triangles".into());
+        return Err(DecodeError::Corrupt("quantized-mesh: no triangles".into()));
     }
     let n = side.max(2) as usize;
     let scale = (n - 1) as f64 / 32767.0;
@@ -247,9 +278,23 @@ mod tests {
         // A PNG of a few dozen bytes declaring 60000 x 60000 pixels: refused by its header.
         let huge = globus_test_support::http::absurd_png();
         let err = decode_image(&huge, DecodeLimits::default()).unwrap_err();
-        assert!(err.contains("60000 x 60000"), "{err}");
+        assert!(
+            matches!(
+                err,
+                DecodeError::TooLarge {
+                    width: 60000,
+                    height: 60000,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("60000 x 60000"), "{err}");
         let err = decode_image(b"<html>503</html>", DecodeLimits::default()).unwrap_err();
-        assert!(err.contains("not an image"), "{err}");
+        assert!(
+            matches!(&err, DecodeError::NotAnImage(m) if m.contains("not an image")),
+            "{err}"
+        );
         assert!(decode_image(&px, DecodeLimits::default()).is_err());
     }
 

@@ -32,7 +32,7 @@ use crate::decode::{
 use crate::fetch::pmtiles::{FileRange, HttpRange, KeptHead};
 use crate::fetch::{
     CachedFetch, Cancel, DirectoryFetch, DiskCacheOptions, Fetch, FetchError, HttpClient,
-    MbTilesFetch, PmTilesFetch, TemplateFetch, WmsFetch, WmsVersion,
+    MbTilesFetch, OpenError, PmTilesFetch, TemplateFetch, WmsFetch, WmsVersion,
 };
 use crate::pyramid::{PyramidSpec, RasterPyramid, SampleGrid};
 
@@ -70,26 +70,25 @@ pub struct SourceSpec {
 
 impl SourceSpec {
     /// Parses `LOCATION[#key=value&...]`.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, OpenError> {
         let (url, opts) = text.split_once('#').unwrap_or((text, ""));
         let mut s = SourceSpec {
             url: url.to_string(),
             ..Self::default()
         };
         for kv in opts.split('&').filter(|kv| !kv.is_empty()) {
-            let (k, v) = kv
-                .split_once('=')
-                .ok_or_else(|| format!("source {text:?}: option {kv:?} is not key=value"))?;
+            let (k, v) = kv.split_once('=').ok_or_else(|| {
+                spec_error(format!("source {text:?}: option {kv:?} is not key=value"))
+            })?;
             let num = |v: &str| {
                 v.parse::<u32>()
-                    .map_err(|_| format!("source {text:?}: {k}={v} is not a number"))
+                    .map_err(|_| spec_error(format!("source {text:?}: {k}={v} is not a number")))
             };
-            let level = |v: &str| -> Result<u8, String> {
+            let level = |v: &str| -> Result<u8, OpenError> {
                 num(v).and_then(|n| {
-                    u8::try_from(n)
-                        .ok()
-                        .filter(|&l| l <= 29)
-                        .ok_or_else(|| format!("source {text:?}: {k}={v} is not a level (0-29)"))
+                    u8::try_from(n).ok().filter(|&l| l <= 29).ok_or_else(|| {
+                        spec_error(format!("source {text:?}: {k}={v} is not a level (0-29)"))
+                    })
                 })
             };
             match k {
@@ -102,9 +101,9 @@ impl SourceSpec {
                 "bounds" => {
                     let b: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
                     let [w, so, e, n] = b[..] else {
-                        return Err(format!(
+                        return Err(spec_error(format!(
                             "source {text:?}: bounds={v} is not W,S,E,N degrees"
-                        ));
+                        )));
                     };
                     s.bounds = Some([w, so, e, n]);
                 }
@@ -113,9 +112,9 @@ impl SourceSpec {
                 "wms_version" => s.wms_version = Some(v.into()),
                 "format" => s.format = Some(v.replace("%2F", "/")),
                 other => {
-                    return Err(format!(
+                    return Err(spec_error(format!(
                         "source {text:?}: unknown option {other:?} (known: encoding scheme minzoom maxzoom tile_size grid bounds subdomains wms_layers wms_version format)"
-                    ));
+                    )));
                 }
             }
         }
@@ -213,10 +212,10 @@ pub fn open_layer(
     kind: LayerKind,
     client: &Arc<HttpClient>,
     disk_cache: Option<&DiskCacheOptions>,
-) -> Result<OpenedLayer, String> {
+) -> Result<OpenedLayer, OpenError> {
     // Tile services (and archives over HTTP) go through the disk cache, if there is one;
     // files need none.
-    let cached = |f: Box<dyn Fetch>| -> Result<Arc<dyn Fetch>, String> {
+    let cached = |f: Box<dyn Fetch>| -> Result<Arc<dyn Fetch>, OpenError> {
         Ok(match disk_cache {
             Some(o) => Arc::new(CachedFetch::new(f, o.clone())?),
             None => Arc::from(f),
@@ -240,7 +239,11 @@ pub fn open_layer(
         let version = match spec.wms_version.as_deref().unwrap_or("1.3.0") {
             "1.1.1" => WmsVersion::V1_1_1,
             "1.3.0" => WmsVersion::V1_3_0,
-            v => return Err(format!("WMS {url}: version {v} (use 1.1.1 or 1.3.0)")),
+            v => {
+                return Err(spec_error(format!(
+                    "WMS {url}: version {v} (use 1.1.1 or 1.3.0)"
+                )));
+            }
         };
         let scheme = parse_scheme(spec.scheme.as_deref(), TilingScheme::Geographic)?;
         let size = spec.tile_size.unwrap_or(256);
@@ -282,9 +285,9 @@ pub fn open_layer(
         (fetch, meta_from_json(&json))
     } else if url.ends_with(".mbtiles") {
         if is_http {
-            return Err(format!(
+            return Err(spec_error(format!(
                 "{url}: MBTiles cannot be read over HTTP (use PMTiles)"
-            ));
+            )));
         }
         let m = MbTilesFetch::open(Path::new(url))?;
         let j = serde_json::Value::Object(
@@ -342,13 +345,13 @@ pub fn open_layer(
         let root = Path::new(url);
         let meta_path = root.join("metadata.json");
         let text = std::fs::read_to_string(&meta_path).map_err(|e| {
-            format!(
+            OpenError::Unreadable(format!(
                 "{}: {e} (a tile directory needs the metadata.json `globus tile` writes)",
                 meta_path.display()
-            )
+            ))
         })?;
-        let json: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", meta_path.display()))?;
+        let json: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| OpenError::Invalid(format!("{}: {e}", meta_path.display())))?;
         let meta = meta_from_json(&json);
         let ext = meta.format.clone().unwrap_or_else(|| "png".into());
         let row = if meta.tms { "{-y}" } else { "{y}" };
@@ -378,15 +381,19 @@ pub fn open_layer(
     };
     let max_level = spec.maxzoom.or(meta.max).unwrap_or(default_max);
     if min_level > max_level {
-        return Err(format!(
+        return Err(spec_error(format!(
             "{url}: minzoom {min_level} is above maxzoom {max_level}"
-        ));
+        )));
     }
     let mut tile_size = spec.tile_size.or(meta.tile_size).unwrap_or(256);
     let mut grid = match spec.grid.as_deref() {
         Some("corners") => SampleGrid::Corners,
         Some("cells") => SampleGrid::Cells,
-        Some(g) => return Err(format!("{url}: grid {g:?} (use corners or cells)")),
+        Some(g) => {
+            return Err(spec_error(format!(
+                "{url}: grid {g:?} (use corners or cells)"
+            )));
+        }
         None => meta.grid.unwrap_or(SampleGrid::Cells),
     };
     if quantized_mesh {
@@ -394,7 +401,9 @@ pub fn open_layer(
         grid = SampleGrid::Corners;
     }
     if !(2..=4096).contains(&tile_size) {
-        return Err(format!("{url}: tile size {tile_size}"));
+        return Err(spec_error(format!(
+            "{url}: tile size {tile_size} (2 to 4096 samples)"
+        )));
     }
     let bounds = spec
         .bounds
@@ -407,12 +416,12 @@ pub fn open_layer(
         LayerKind::Elevation if quantized_mesh => Some(ElevationFormat::QuantizedMesh),
         LayerKind::Elevation => {
             let name = spec.encoding.clone().or(meta.encoding).ok_or_else(|| {
-                format!("{url}: which elevation encoding? add #encoding=terrarium (or mapbox, centimetre, quantized-mesh)")
+                spec_error(format!("{url}: which elevation encoding? add #encoding=terrarium (or mapbox, centimetre, quantized-mesh)"))
             })?;
             Some(ElevationFormat::Rgb(ElevationEncoding::parse(&name).ok_or_else(|| {
-                format!(
+                spec_error(format!(
                     "{url}: unknown elevation encoding {name:?} (terrarium, mapbox, centimetre, quantized-mesh)"
-                )
+                ))
             })?))
         }
     };
@@ -436,7 +445,7 @@ fn served_metadata(
     client: &HttpClient,
     url: &str,
     disk_cache: Option<&DiskCacheOptions>,
-) -> Result<serde_json::Value, String> {
+) -> Result<serde_json::Value, OpenError> {
     let copy = disk_cache.map(|o| {
         o.dir.join(format!(
             "{:016x}.json",
@@ -453,15 +462,18 @@ fn served_metadata(
             body.fetched.bytes
         }
         (Ok(None), _) => {
-            return Err(format!(
+            return Err(OpenError::Unreadable(format!(
                 "{url}: not found (a served directory needs its metadata.json, or give a {{z}}/{{x}}/{{y}} template)"
-            ));
+            )));
         }
-        (Err(e @ FetchError::Transient { .. }), Some(path)) => std::fs::read(path)
-            .map_err(|_| format!("{url}: {e} (and no copy in the disk cache)"))?,
-        (Err(e), _) => return Err(format!("{url}: {e}")),
+        (Err(e @ FetchError::Transient { .. }), Some(path)) => {
+            std::fs::read(path).map_err(|_| {
+                OpenError::Unreadable(format!("{url}: {e} (and no copy in the disk cache)"))
+            })?
+        }
+        (Err(e), _) => return Err(OpenError::Unreadable(format!("{url}: {e}"))),
     };
-    serde_json::from_slice(&bytes).map_err(|e| format!("{url}: {e}"))
+    serde_json::from_slice(&bytes).map_err(|e| OpenError::Invalid(format!("{url}: {e}")))
 }
 
 fn pm_meta<R: crate::fetch::RangeRead>(p: &PmTilesFetch<R>) -> serde_json::Value {
@@ -476,11 +488,15 @@ fn pm_meta<R: crate::fetch::RangeRead>(p: &PmTilesFetch<R>) -> serde_json::Value
     j
 }
 
-fn parse_scheme(text: Option<&str>, default: TilingScheme) -> Result<TilingScheme, String> {
+fn parse_scheme(text: Option<&str>, default: TilingScheme) -> Result<TilingScheme, OpenError> {
     text.map_or(Ok(default), |t| {
         t.parse()
-            .map_err(|e: globus_tiling::ParseTileNameError| e.0)
+            .map_err(|e: globus_tiling::ParseTileNameError| OpenError::Spec(e.0))
     })
+}
+
+fn spec_error(message: String) -> OpenError {
+    OpenError::Spec(message)
 }
 
 /// Bytes of decoded source tiles a layer keeps by default (64 tiles of 256 x 256 samples):
@@ -493,10 +509,10 @@ pub fn elevation_pyramid(
     layer: OpenedLayer,
     limits: DecodeLimits,
     cache_bytes: usize,
-) -> Result<Arc<RasterPyramid<HeightImage>>, String> {
-    let encoding = layer
-        .encoding
-        .ok_or_else(|| format!("{}: not an elevation layer", layer.fetch.name()))?;
+) -> Result<Arc<RasterPyramid<HeightImage>>, OpenError> {
+    let encoding = layer.encoding.ok_or_else(|| {
+        OpenError::Spec(format!("{}: not an elevation layer", layer.fetch.name()))
+    })?;
     Ok(Arc::new(RasterPyramid::new(
         layer.fetch,
         layer.spec,

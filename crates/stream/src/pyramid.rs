@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use globus_tiling::{GeoRect, TileKey, TilingScheme, lat_to_mercator_y};
 use rustc_hash::FxHashMap;
 
+use crate::decode::DecodeError;
 use crate::fetch::{Cancel, Fetch, FetchError};
 
 /// Where a tile's samples lie.
@@ -114,8 +115,9 @@ impl Samples for crate::decode::Rgba {
     }
 }
 
-/// A decoded tile, "no tile", or why the tile is broken.
-type TileEntry<T> = Result<Option<Arc<T>>, String>;
+/// A decoded tile, "no tile", or why the tile is broken for good
+/// ([`FetchError::Permanent`]: transient failures are not kept).
+type TileEntry<T> = Result<Option<Arc<T>>, FetchError>;
 
 /// Decoded tiles with their last-use stamps.
 struct TileCache<T> {
@@ -132,11 +134,11 @@ fn entry_bytes<T: Samples>(e: &TileEntry<T>) -> usize {
     match e {
         Ok(Some(t)) => t.byte_size() + RECORD,
         Ok(None) => RECORD,
-        Err(m) => m.len() + RECORD,
+        Err(_) => 4 * RECORD,
     }
 }
 
-type Decoder<T> = dyn Fn(&[u8]) -> Result<T, String> + Send + Sync;
+pub(crate) type Decoder<T> = dyn Fn(&[u8]) -> Result<T, DecodeError> + Send + Sync;
 
 /// A pyramid of decoded tiles of type `T`.
 pub struct RasterPyramid<T: Samples> {
@@ -241,7 +243,7 @@ impl<T: Samples> RasterPyramid<T> {
                 let now = c.now;
                 if let Some(e) = c.tiles.get_mut(&key) {
                     e.1 = now;
-                    return e.0.clone().map_err(FetchError::Permanent);
+                    return e.0.clone();
                 }
             }
             let (flight, leads) = {
@@ -309,7 +311,7 @@ impl<T: Samples> RasterPyramid<T> {
             Ok(Some(f)) => self
                 .decode_checked(key, &f.bytes)
                 .map(|t| Some(Arc::new(t))),
-            Err(FetchError::Permanent(m)) => Err(m),
+            Err(e @ FetchError::Permanent(_)) => Err(e),
             Err(e) => {
                 if let FetchError::Transient { retry_after, .. } = &e {
                     let quiet = retry_after.map_or(NEIGHBOUR_QUIET, |r| r.max(NEIGHBOUR_QUIET));
@@ -347,7 +349,7 @@ impl<T: Samples> RasterPyramid<T> {
             c.bytes -= entry_bytes(&old.0);
         }
         c.bytes += bytes;
-        entry.map_err(FetchError::Permanent)
+        entry
     }
 
     /// Like [`RasterPyramid::tile`], for samples a tile reads beyond its own edges: a tile
@@ -373,15 +375,18 @@ impl<T: Samples> RasterPyramid<T> {
         self.tile(key, cancel)
     }
 
-    fn decode_checked(&self, key: TileKey, bytes: &[u8]) -> Result<T, String> {
-        let t = (self.decode)(bytes).map_err(|m| format!("{}: {m}", self.fetch.locate(key)))?;
+    /// Decodes a tile's bytes; a tile that does not decode, or decodes to another size than
+    /// the pyramid's, is broken for good.
+    fn decode_checked(&self, key: TileKey, bytes: &[u8]) -> Result<T, FetchError> {
+        let t = (self.decode)(bytes)
+            .map_err(|e| FetchError::Permanent(format!("{}: {e}", self.fetch.locate(key))))?;
         let (w, h) = t.size();
         if w != self.spec.tile_size || h != self.spec.tile_size {
-            return Err(format!(
+            return Err(FetchError::Permanent(format!(
                 "{}: {w} x {h} samples, the pyramid's tiles have {1} x {1}",
                 self.fetch.locate(key),
                 self.spec.tile_size
-            ));
+            )));
         }
         Ok(t)
     }

@@ -165,9 +165,11 @@ impl RasterTerrainSource {
         ellipsoid: Ellipsoid,
         height_range_m: (f64, f64),
         mesh_options: MeshOptions,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, crate::fetch::OpenError> {
         if elevation.is_empty() && imagery.is_empty() {
-            return Err("no elevation or imagery layer given".into());
+            return Err(crate::fetch::OpenError::Spec(
+                "no elevation or imagery layer given".into(),
+            ));
         }
         // The deepest engine level whose mesh (or colour image) is still coarser than some
         // layer's data.

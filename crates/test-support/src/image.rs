@@ -26,13 +26,13 @@ impl Rgba {
     }
 
     /// Writes a PNG (alpha forced opaque when `opaque`), for a person to look at.
-    pub fn save_png(&self, path: &Path, opaque: bool) -> Result<(), String> {
+    pub fn save_png(&self, path: &Path, opaque: bool) -> Result<(), std::io::Error> {
         let mut px = self.pixels.clone();
         if opaque {
             px.chunks_exact_mut(4).for_each(|p| p[3] = 255);
         }
         image::save_buffer(path, &px, self.width, self.height, image::ColorType::Rgba8)
-            .map_err(|e| format!("writing {}: {e}", path.display()))
+            .map_err(|e| std::io::Error::other(format!("writing {}: {e}", path.display())))
     }
 
     /// Mean absolute difference per channel (RGB) between two images of the same size, 0..255.

@@ -54,20 +54,40 @@ pub fn write_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
+/// Why PMTiles bytes could not be read.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PmTilesError {
+    /// The bytes do not start with the PMTiles magic number.
+    #[error("not a PMTiles archive (no magic number)")]
+    NotPmTiles,
+    /// A version other than 3.
+    #[error("PMTiles version {0} (only 3 is read)")]
+    Version(u8),
+    /// A header or directory is cut short or inconsistent.
+    #[error("{0}")]
+    Malformed(String),
+}
+
+fn malformed(message: impl Into<String>) -> PmTilesError {
+    PmTilesError::Malformed(message.into())
+}
+
 /// Reads a varint at `*at`, advancing it.
-fn read_varint(bytes: &[u8], at: &mut usize) -> Result<u64, String> {
+fn read_varint(bytes: &[u8], at: &mut usize) -> Result<u64, PmTilesError> {
     let mut v = 0u64;
     for shift in (0..64).step_by(7) {
         let b = *bytes
             .get(*at)
-            .ok_or_else(|| format!("directory ends inside a varint at byte {at}"))?;
+            .ok_or_else(|| malformed(format!("directory ends inside a varint at byte {at}")))?;
         *at += 1;
         v |= u64::from(b & 0x7f) << shift;
         if b & 0x80 == 0 {
             return Ok(v);
         }
     }
-    Err(format!("varint longer than 64 bits before byte {at}"))
+    Err(malformed(format!(
+        "varint longer than 64 bits before byte {at}"
+    )))
 }
 
 /// A directory, uncompressed, in the specification's column layout.
@@ -97,14 +117,14 @@ pub fn encode_directory(entries: &[Entry]) -> Vec<u8> {
 
 /// Parses an uncompressed directory. Every entry takes at least four bytes, so a count larger
 /// than the input allows is refused before anything is allocated.
-pub fn decode_directory(bytes: &[u8]) -> Result<Vec<Entry>, String> {
+pub fn decode_directory(bytes: &[u8]) -> Result<Vec<Entry>, PmTilesError> {
     let mut at = 0;
     let n = read_varint(bytes, &mut at)?;
     if n > (bytes.len() as u64) / 4 {
-        return Err(format!(
+        return Err(malformed(format!(
             "directory claims {n} entries in {} bytes",
             bytes.len()
-        ));
+        )));
     }
     let n = n as usize;
     let mut entries = vec![
@@ -120,25 +140,27 @@ pub fn decode_directory(bytes: &[u8]) -> Result<Vec<Entry>, String> {
     for e in &mut entries {
         last = last
             .checked_add(read_varint(bytes, &mut at)?)
-            .ok_or("tile ID overflows")?;
+            .ok_or_else(|| malformed("tile ID overflows"))?;
         e.tile_id = last;
     }
     for e in &mut entries {
-        e.run_length = u32::try_from(read_varint(bytes, &mut at)?).map_err(|_| "run length")?;
+        e.run_length = u32::try_from(read_varint(bytes, &mut at)?)
+            .map_err(|_| malformed("run length over 32 bits"))?;
     }
     for e in &mut entries {
-        e.length = u32::try_from(read_varint(bytes, &mut at)?).map_err(|_| "entry length")?;
+        e.length = u32::try_from(read_varint(bytes, &mut at)?)
+            .map_err(|_| malformed("entry length over 32 bits"))?;
     }
     for i in 0..n {
         let v = read_varint(bytes, &mut at)?;
         entries[i].offset = if v == 0 {
             if i == 0 {
-                return Err("first entry has a relative offset".into());
+                return Err(malformed("first entry has a relative offset"));
             }
             let prev = entries[i - 1];
             prev.offset
                 .checked_add(u64::from(prev.length))
-                .ok_or("offset overflows")?
+                .ok_or_else(|| malformed("offset overflows"))?
         } else {
             v - 1
         };
@@ -246,18 +268,18 @@ impl Header {
     }
 
     /// Parses a header (the first 127 bytes of `bytes`).
-    pub fn parse(bytes: &[u8]) -> Result<Self, String> {
+    pub fn parse(bytes: &[u8]) -> Result<Self, PmTilesError> {
         if bytes.len() < HEADER_LEN {
-            return Err(format!(
+            return Err(malformed(format!(
                 "header needs {HEADER_LEN} bytes, got {}",
                 bytes.len()
-            ));
+            )));
         }
         if &bytes[..7] != b"PMTiles" {
-            return Err("not a PMTiles archive (no magic number)".into());
+            return Err(PmTilesError::NotPmTiles);
         }
         if bytes[7] != 3 {
-            return Err(format!("PMTiles version {} (only 3 is read)", bytes[7]));
+            return Err(PmTilesError::Version(bytes[7]));
         }
         let u64_at = |i: usize| {
             let mut b = [0u8; 8];

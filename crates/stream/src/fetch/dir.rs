@@ -9,7 +9,7 @@ use std::path::{Component, Path, PathBuf};
 
 use globus_tiling::{TileKey, TilingScheme};
 
-use super::{Cancel, Fetch, FetchError, Fetched, UrlTemplate};
+use super::{Cancel, Fetch, FetchError, Fetched, OpenError, UrlTemplate};
 
 /// Largest tile file read, bytes (a tile is a few hundred KiB at most).
 pub const MAX_TILE_FILE_BYTES: u64 = 64 << 20;
@@ -24,19 +24,19 @@ pub struct DirectoryFetch {
 
 impl DirectoryFetch {
     /// Tiles of `scheme` under `root`, named by `template` relative to it.
-    pub fn new(root: &Path, template: &str, scheme: TilingScheme) -> Result<Self, String> {
-        let root = root
-            .canonicalize()
-            .map_err(|e| format!("tile directory {}: {e}", root.display()))?;
+    pub fn new(root: &Path, template: &str, scheme: TilingScheme) -> Result<Self, OpenError> {
+        let root = root.canonicalize().map_err(|e| {
+            OpenError::Unreadable(format!("tile directory {}: {e}", root.display()))
+        })?;
         let t = Path::new(template);
         if t.is_absolute()
             || t.components()
                 .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
         {
-            return Err(format!(
+            return Err(OpenError::Spec(format!(
                 "tile path template {template:?} must be relative to {} and must not use '..'",
                 root.display()
-            ));
+            )));
         }
         let template = UrlTemplate::parse(template, &[])?;
         let name = root.join(template.as_str()).display().to_string();

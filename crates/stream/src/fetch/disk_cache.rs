@@ -23,7 +23,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use globus_tiling::TileKey;
 
-use super::{Cancel, Fetch, FetchError, Fetched};
+use super::{Cancel, Fetch, FetchError, Fetched, OpenError};
 
 const MAGIC: &[u8; 8] = b"GLBSTIL1";
 const HEADER: usize = 16;
@@ -95,12 +95,12 @@ fn folder_bytes(dir: &Path) -> u64 {
 
 impl CachedFetch {
     /// Puts a disk cache in front of `inner`.
-    pub fn new(inner: Box<dyn Fetch>, options: DiskCacheOptions) -> Result<Self, String> {
+    pub fn new(inner: Box<dyn Fetch>, options: DiskCacheOptions) -> Result<Self, OpenError> {
         let root = options
             .dir
             .join(format!("{:016x}", origin_hash(inner.name())));
         std::fs::create_dir_all(&root)
-            .map_err(|e| format!("disk cache {}: {e}", root.display()))?;
+            .map_err(|e| OpenError::Unreadable(format!("disk cache {}: {e}", root.display())))?;
         // Note which origin the folder belongs to (for people looking at the cache).
         let _ = std::fs::write(root.join("ORIGIN"), inner.name());
         let bytes = folder_bytes(&options.dir);

@@ -18,7 +18,7 @@ use std::time::{Duration, SystemTime};
 use globus_tiling::{TileKey, TilingScheme};
 use rustc_hash::FxHashMap;
 
-use super::{Cancel, Fetch, FetchError, Fetched, UrlTemplate};
+use super::{Cancel, Fetch, FetchError, Fetched, OpenError, UrlTemplate};
 
 /// The User-Agent Globus sends unless told otherwise.
 pub const USER_AGENT: &str = concat!(
@@ -348,11 +348,11 @@ impl TemplateFetch {
         template: &str,
         subdomains: &[&str],
         scheme: TilingScheme,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, OpenError> {
         if !(template.starts_with("http://") || template.starts_with("https://")) {
-            return Err(format!(
+            return Err(OpenError::Spec(format!(
                 "tile URL {template:?} must start with http:// or https://"
-            ));
+            )));
         }
         Ok(Self {
             client,

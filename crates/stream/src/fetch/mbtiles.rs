@@ -10,7 +10,7 @@ use globus_tiling::{TileKey, TilingScheme};
 use rusqlite::{Connection, OpenFlags, OptionalExtension};
 use rustc_hash::FxHashMap;
 
-use super::{Cancel, Fetch, FetchError, Fetched};
+use super::{Cancel, Fetch, FetchError, Fetched, OpenError};
 
 /// Reads tiles from an MBTiles file.
 pub struct MbTilesFetch {
@@ -21,23 +21,27 @@ pub struct MbTilesFetch {
     metadata: FxHashMap<String, String>,
 }
 
-fn open(path: &Path) -> Result<Connection, String> {
+fn open(path: &Path) -> Result<Connection, OpenError> {
     Connection::open_with_flags(
         path,
         OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
     )
-    .map_err(|e| format!("MBTiles {}: {e}", path.display()))
+    .map_err(|e| OpenError::Unreadable(format!("MBTiles {}: {e}", path.display())))
 }
 
 impl MbTilesFetch {
     /// Opens `path`. The scheme is the file's `scheme` metadata row if it names one of ours
     /// (`globus tile` writes it), else Web Mercator, as the MBTiles specification says.
-    pub fn open(path: &Path) -> Result<Self, String> {
+    pub fn open(path: &Path) -> Result<Self, OpenError> {
         if !path.is_file() {
-            return Err(format!("MBTiles {}: no such file", path.display()));
+            return Err(OpenError::Unreadable(format!(
+                "MBTiles {}: no such file",
+                path.display()
+            )));
         }
         let conn = open(path)?;
-        let err = |e: rusqlite::Error| format!("MBTiles {}: {e}", path.display());
+        let err =
+            |e: rusqlite::Error| OpenError::Invalid(format!("MBTiles {}: {e}", path.display()));
         let metadata: FxHashMap<String, String> = {
             let mut stmt = conn
                 .prepare("SELECT name, value FROM metadata")
@@ -82,7 +86,7 @@ impl Fetch for MbTilesFetch {
         let conn = self.idle.lock().unwrap_or_else(|p| p.into_inner()).pop();
         let conn = match conn {
             Some(c) => c,
-            None => open(&self.path).map_err(FetchError::transient)?,
+            None => open(&self.path).map_err(|e| FetchError::transient(e.to_string()))?,
         };
         let row = self.scheme.tms_y(key);
         let got: Result<Option<Vec<u8>>, _> = conn

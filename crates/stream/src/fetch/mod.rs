@@ -22,6 +22,7 @@ use std::time::Duration;
 use globus_tiling::{TileKey, TilingScheme};
 
 pub use dir::DirectoryFetch;
+// (OpenError is defined below.)
 pub use disk_cache::{CachedFetch, DiskCacheOptions, DiskCacheStats};
 pub use http::{HttpClient, HttpOptions, TemplateFetch};
 pub use mbtiles::MbTilesFetch;
@@ -48,6 +49,23 @@ impl Cancel {
     pub fn is_cancelled(&self) -> bool {
         self.0.load(Ordering::Relaxed)
     }
+}
+
+/// Why a source of tiles could not be opened. Every message names the file, folder or URL
+/// at fault.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum OpenError {
+    /// The source's description (a URL template, a setting) is malformed or asks for what is
+    /// not supported.
+    #[error("{0}")]
+    Spec(String),
+    /// A file, folder or URL the source needs cannot be read (missing, unreachable, refused).
+    #[error("{0}")]
+    Unreadable(String),
+    /// What was read is not what a source of this kind holds (an archive's header or
+    /// directory, metadata).
+    #[error("{0}")]
+    Invalid(String),
 }
 
 /// Why bytes could not be fetched.

@@ -25,7 +25,7 @@ use globus_tiling::pmtiles::{
 use globus_tiling::{TileKey, TilingScheme};
 use rustc_hash::FxHashMap;
 
-use super::{Cancel, Fetch, FetchError, Fetched, HttpClient};
+use super::{Cancel, Fetch, FetchError, Fetched, HttpClient, OpenError};
 
 /// Largest directory, metadata or tile accepted, bytes (compressed or not).
 const MAX_PART_BYTES: u64 = 64 << 20;
@@ -49,12 +49,11 @@ pub struct FileRange {
 
 impl FileRange {
     /// Opens `path`.
-    pub fn open(path: &Path) -> Result<Self, String> {
-        let file = File::open(path).map_err(|e| format!("PMTiles {}: {e}", path.display()))?;
-        let len = file
-            .metadata()
-            .map_err(|e| format!("PMTiles {}: {e}", path.display()))?
-            .len();
+    pub fn open(path: &Path) -> Result<Self, OpenError> {
+        let unreadable =
+            |e: std::io::Error| OpenError::Unreadable(format!("PMTiles {}: {e}", path.display()));
+        let file = File::open(path).map_err(unreadable)?;
+        let len = file.metadata().map_err(unreadable)?.len();
         Ok(Self {
             file,
             name: path.display().to_string(),
@@ -282,28 +281,34 @@ fn inflate(name: &str, what: &str, bytes: &[u8], codec: u8) -> Result<Vec<u8>, F
 
 impl<R: RangeRead> PmTilesFetch<R> {
     /// Opens the archive behind `reader`.
-    pub fn open(reader: R) -> Result<Self, String> {
+    pub fn open(reader: R) -> Result<Self, OpenError> {
         let cancel = Cancel::new();
         let name = reader.name().to_string();
-        let e = |e: FetchError| format!("{name}: {e}");
+        let unreadable = |e: FetchError| OpenError::Unreadable(format!("{name}: {e}"));
+        let invalid = |what: &str, m: &dyn std::fmt::Display| {
+            OpenError::Invalid(format!("{name}: {what}{m}"))
+        };
         let head = reader
             .read_range(0, HEADER_LEN as u64, &cancel)
-            .map_err(e)?;
-        let header = Header::parse(&head).map_err(|m| format!("{name}: {m}"))?;
-        let part = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, String> {
+            .map_err(unreadable)?;
+        let header = Header::parse(&head).map_err(|m| invalid("", &m))?;
+        let part = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, OpenError> {
             if len > MAX_PART_BYTES {
-                return Err(format!("{name}: {what} of {len} bytes is too large"));
+                return Err(invalid(what, &format!(" of {len} bytes is too large")));
             }
-            let raw = reader.read_range(offset, len, &cancel).map_err(e)?;
-            inflate(&name, what, &raw, header.internal_compression).map_err(e)
+            let raw = reader
+                .read_range(offset, len, &cancel)
+                .map_err(unreadable)?;
+            inflate(&name, what, &raw, header.internal_compression)
+                .map_err(|e| OpenError::Invalid(e.to_string()))
         };
         let root = decode_directory(&part(header.root, "root directory")?)
-            .map_err(|m| format!("{name}: root directory: {m}"))?;
+            .map_err(|m| invalid("root directory: ", &m))?;
         let metadata: serde_json::Value = if header.metadata.1 == 0 {
             serde_json::Value::Null
         } else {
             serde_json::from_slice(&part(header.metadata, "metadata")?)
-                .map_err(|m| format!("{name}: metadata: {m}"))?
+                .map_err(|m| invalid("metadata: ", &m))?
         };
         let scheme = metadata["scheme"]
             .as_str()
@@ -313,7 +318,11 @@ impl<R: RangeRead> PmTilesFetch<R> {
             (_, Some(n)) if n <= 1 => n as u8,
             (TilingScheme::Geographic, None) => 1,
             (_, None) => 0,
-            (_, Some(n)) => return Err(format!("{name}: pmtiles_level_offset {n} is not 0 or 1")),
+            (_, Some(n)) => {
+                return Err(OpenError::Invalid(format!(
+                    "{name}: pmtiles_level_offset {n} is not 0 or 1"
+                )));
+            }
         };
         Ok(Self {
             reader,

@@ -17,6 +17,8 @@ use std::fmt::Write;
 
 use globus_tiling::{TileKey, TilingScheme};
 
+use super::OpenError;
+
 #[derive(Clone, Debug, PartialEq, Eq)]
 enum Part {
     Text(String),
@@ -38,7 +40,7 @@ pub struct UrlTemplate {
 
 impl UrlTemplate {
     /// Parses `template`; `{s}` rotates through `subdomains` (default `a`, `b`, `c`).
-    pub fn parse(template: &str, subdomains: &[&str]) -> Result<Self, String> {
+    pub fn parse(template: &str, subdomains: &[&str]) -> Result<Self, OpenError> {
         let mut parts = Vec::new();
         let mut rest = template;
         while let Some(open) = rest.find('{') {
@@ -47,7 +49,7 @@ impl UrlTemplate {
             }
             let close = rest[open..]
                 .find('}')
-                .ok_or_else(|| format!("template {template:?}: unclosed '{{'"))?
+                .ok_or_else(|| OpenError::Spec(format!("template {template:?}: unclosed '{{'")))?
                 + open;
             let part = match &rest[open + 1..close] {
                 "z" => Part::Z,
@@ -57,9 +59,9 @@ impl UrlTemplate {
                 "q" | "quadkey" => Part::Quadkey,
                 "s" => Part::Subdomain,
                 other => {
-                    return Err(format!(
+                    return Err(OpenError::Spec(format!(
                         "template {template:?}: unknown placeholder {{{other}}} (known: {{z}} {{x}} {{y}} {{-y}} {{reverseY}} {{q}} {{quadkey}} {{s}})"
-                    ));
+                    )));
                 }
             };
             parts.push(part);
@@ -72,9 +74,9 @@ impl UrlTemplate {
         let has_row = has(&Part::Y) || has(&Part::ReverseY);
         let names_tile = has(&Part::Quadkey) || (has(&Part::Z) && has(&Part::X) && has_row);
         if !names_tile {
-            return Err(format!(
+            return Err(OpenError::Spec(format!(
                 "template {template:?} names no tile: it needs {{z}}, {{x}} and {{y}} (or {{-y}}), or {{q}}"
-            ));
+            )));
         }
         let subdomains = if subdomains.is_empty() {
             vec!["a".into(), "b".into(), "c".into()]
@@ -182,7 +184,7 @@ mod tests {
     fn refuses_bad_templates_by_name() {
         for bad in ["{z}/{x}/{w}.png", "{z}/{x/{y}", "tiles/{z}.png", "plain"] {
             let e = UrlTemplate::parse(bad, &[]).unwrap_err();
-            assert!(e.contains(bad), "{e}");
+            assert!(matches!(&e, OpenError::Spec(m) if m.contains(bad)), "{e}");
         }
     }
 }

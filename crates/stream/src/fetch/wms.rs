@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use globus_tiling::{TileKey, TilingScheme, lat_to_mercator_y};
 
-use super::{Cancel, Fetch, FetchError, Fetched, HttpClient};
+use super::{Cancel, Fetch, FetchError, Fetched, HttpClient, OpenError};
 
 /// Half the side of the Web Mercator square, metres (pi times the WGS84 semi-major axis).
 const MERCATOR_HALF_M: f64 = std::f64::consts::PI * 6_378_137.0;
@@ -45,14 +45,14 @@ impl WmsFetch {
         scheme: TilingScheme,
         format: &str,
         tile_size: u32,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, OpenError> {
         if !(base.starts_with("http://") || base.starts_with("https://")) {
-            return Err(format!(
+            return Err(OpenError::Spec(format!(
                 "WMS URL {base:?} must start with http:// or https://"
-            ));
+            )));
         }
         if layers.is_empty() {
-            return Err(format!("WMS {base}: no layers named"));
+            return Err(OpenError::Spec(format!("WMS {base}: no layers named")));
         }
         Ok(Self {
             client,
