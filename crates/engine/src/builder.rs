@@ -329,9 +329,27 @@ impl GlobeBuilder {
         gpu: &GpuContext,
         colour_format: wgpu::TextureFormat,
     ) -> Result<Globe, EngineError> {
+        self.build_on(
+            &gpu.device,
+            &gpu.queue,
+            gpu.adapter.get_info().backend,
+            colour_format,
+        )
+    }
+
+    /// Like [`GlobeBuilder::build`], on a device and queue the application made itself (an
+    /// engine that already has its wgpu context). `backend` is its adapter's
+    /// (`adapter.get_info().backend`): OpenGL's depth range needs a larger near plane.
+    pub fn build_on(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        backend: wgpu::Backend,
+        colour_format: wgpu::TextureFormat,
+    ) -> Result<Globe, EngineError> {
         self.check()?;
         let source = self.open_source()?;
-        Globe::new(self, gpu, colour_format, source)
+        Globe::new(self, (device, queue, backend), colour_format, source)
     }
 
     /// Refuses options out of their ranges, naming the option.

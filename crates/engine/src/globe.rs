@@ -22,8 +22,8 @@ use std::time::{Duration, Instant};
 
 use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
 use globus_render::{
-    DrawStats, FrameCamera, FrameFormats, FrameInputs, FrameTargets, GlobeRenderer, GpuContext,
-    Lighting, NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
+    DrawStats, FrameCamera, FrameFormats, FrameInputs, FrameTargets, GlobeRenderer, Lighting,
+    NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
 };
 use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
 use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, TileKey, select_into};
@@ -132,6 +132,8 @@ pub struct Globe {
     drawn_camera: Option<FrameCamera>,
     /// Largest near plane (depends on the backend's depth range).
     near_cap_m: f64,
+    /// Whether the last render's overlay passes wrote the id buffer.
+    ids_written: bool,
 }
 
 impl Globe {
@@ -142,12 +144,11 @@ impl Globe {
 
     pub(crate) fn new(
         builder: &GlobeBuilder,
-        gpu: &GpuContext,
+        (device, queue, backend): (&wgpu::Device, &wgpu::Queue, wgpu::Backend),
         colour_format: wgpu::TextureFormat,
         source: std::sync::Arc<dyn TerrainSource>,
     ) -> Result<Self, EngineError> {
         let settings = builder.settings();
-        let device = &gpu.device;
         // The frame's targets first: a memory budget counts them in the process's footprint.
         let targets = settings
             .viewport
@@ -188,7 +189,7 @@ impl Globe {
         );
         Ok(Self {
             device: device.clone(),
-            queue: gpu.queue.clone(),
+            queue: queue.clone(),
             layer,
             renderer: GlobeRenderer::new(device, formats, pool),
             formats,
@@ -204,7 +205,8 @@ impl Globe {
             memory,
             camera: None,
             drawn_camera: None,
-            near_cap_m: if gpu.adapter.get_info().backend == wgpu::Backend::Gl {
+            ids_written: false,
+            near_cap_m: if backend == wgpu::Backend::Gl {
                 NEAR_PLANE_CAP_GL_M
             } else {
                 NEAR_PLANE_CAP_M
@@ -504,27 +506,45 @@ impl Globe {
             o.prepare(&frame);
         }
         {
-            let mut pass = begin_pass(encoder, "terrain", colour, targets, true, true);
+            let mut pass = begin_pass(encoder, "terrain", colour, targets, Attach::Terrain);
             self.renderer.draw(&mut pass);
         }
+        // The id buffer is cleared by the first overlay pass: a frame without overlays never
+        // touches it (and picks find no object).
         let draws_in = |p: OverlayPass| overlays.iter().any(|o| o.passes().contains(&p));
+        let mut ids = IdBuffer::Clear;
         if draws_in(OverlayPass::World) || draws_in(OverlayPass::ScreenAligned) {
-            let mut pass = begin_pass(encoder, "world overlays", colour, targets, true, false);
+            let mut pass = begin_pass(
+                encoder,
+                "world overlays",
+                colour,
+                targets,
+                Attach::World(ids),
+            );
             for p in [OverlayPass::World, OverlayPass::ScreenAligned] {
                 for o in overlays.iter().filter(|o| o.passes().contains(&p)) {
                     o.draw(p, &frame, &mut pass);
                 }
             }
+            ids = IdBuffer::Load;
         }
         if draws_in(OverlayPass::Screen) {
-            let mut pass = begin_pass(encoder, "screen overlays", colour, targets, false, false);
+            let mut pass = begin_pass(
+                encoder,
+                "screen overlays",
+                colour,
+                targets,
+                Attach::Screen(ids),
+            );
             for o in overlays
                 .iter()
                 .filter(|o| o.passes().contains(&OverlayPass::Screen))
             {
                 o.draw(OverlayPass::Screen, &frame, &mut pass);
             }
+            ids = IdBuffer::Load;
         }
+        self.ids_written = ids == IdBuffer::Load;
         self.drawn_camera = Some(camera);
     }
 
@@ -544,7 +564,7 @@ impl Globe {
         else {
             return Ok(None);
         };
-        let object = (read.id != 0).then_some(read.id);
+        let object = (self.ids_written && read.id != 0).then_some(read.id);
         let origin = camera.origin();
         let dir = camera.ray_direction(x_px, y_px);
         let from_depth = camera.unproject(x_px, y_px, f64::from(read.depth));
@@ -615,49 +635,80 @@ pub(crate) fn exaggerated(ellipsoid: &Ellipsoid, exaggeration: f64, at: Cartogra
     })
 }
 
-/// Begins a pass over `colour`, the id buffer and (if `depth`) the depth buffer, clearing
-/// them (`clear`) or loading what earlier passes drew.
-fn begin_pass<'e>(
-    encoder: &'e mut wgpu::CommandEncoder,
-    label: &str,
-    colour: &wgpu::TextureView,
-    targets: &FrameTargets,
-    depth: bool,
-    clear: bool,
-) -> wgpu::RenderPass<'e> {
-    let ops = |clear_to| wgpu::Operations {
+/// What the id buffer does in an overlay pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum IdBuffer {
+    /// The frame's first overlay pass clears it.
+    Clear,
+    /// Later passes keep what earlier ones wrote.
+    Load,
+}
+
+/// The attachments of one of the frame's passes.
+#[derive(Clone, Copy, Debug)]
+enum Attach {
+    /// Colour and depth, both cleared.
+    Terrain,
+    /// Colour and depth kept, the id buffer.
+    World(IdBuffer),
+    /// Colour kept, the id buffer, no depth.
+    Screen(IdBuffer),
+}
+
+/// Clears to `clear_to` (if `clear`) or keeps what is there, and stores.
+fn ops<T>(clear: bool, clear_to: T) -> wgpu::Operations<T> {
+    wgpu::Operations {
         load: if clear {
             wgpu::LoadOp::Clear(clear_to)
         } else {
             wgpu::LoadOp::Load
         },
         store: wgpu::StoreOp::Store,
-    };
-    let attachment = |view, clear_to| {
+    }
+}
+
+/// Begins one of the frame's passes over `colour` and the globe's targets.
+fn begin_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    colour: &wgpu::TextureView,
+    targets: &FrameTargets,
+    attach: Attach,
+) -> wgpu::RenderPass<'e> {
+    let attachment = |view, clear, clear_to| {
         Some(wgpu::RenderPassColorAttachment {
             view,
             depth_slice: None,
             resolve_target: None,
-            ops: ops(clear_to),
+            ops: ops(clear, clear_to),
         })
     };
+    let terrain = matches!(attach, Attach::Terrain);
+    let colour_attachment = attachment(colour, terrain, wgpu::Color::BLACK);
+    let ids = match attach {
+        Attach::Terrain => None,
+        Attach::World(ids) | Attach::Screen(ids) => Some(attachment(
+            targets.id_view(),
+            ids == IdBuffer::Clear,
+            wgpu::Color::TRANSPARENT,
+        )),
+    };
+    let both;
+    let colour_attachments: &[_] = match ids {
+        None => std::slice::from_ref(&colour_attachment),
+        Some(ids) => {
+            both = [colour_attachment.clone(), ids];
+            &both
+        }
+    };
+    let depth = !matches!(attach, Attach::Screen(_));
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some(label),
-        color_attachments: &[
-            attachment(colour, wgpu::Color::BLACK),
-            attachment(targets.id_view(), wgpu::Color::TRANSPARENT),
-        ],
+        color_attachments: colour_attachments,
         depth_stencil_attachment: depth.then(|| wgpu::RenderPassDepthStencilAttachment {
             view: targets.depth_view(),
             // Reversed-Z: 0 is infinitely far.
-            depth_ops: Some(wgpu::Operations {
-                load: if clear {
-                    wgpu::LoadOp::Clear(0.0)
-                } else {
-                    wgpu::LoadOp::Load
-                },
-                store: wgpu::StoreOp::Store,
-            }),
+            depth_ops: Some(ops(terrain, 0.0)),
             stencil_ops: None,
         }),
         timestamp_writes: None,

@@ -1,7 +1,8 @@
 //! [`Overlay`]: how an application (and the engine's built-in layers) draws over the terrain.
 //!
-//! A frame is drawn in passes, in this order, into one colour target, one id buffer and (but
-//! for the last) one depth buffer, which the terrain leaves behind (Kaiser 2018, 5.3):
+//! A frame is drawn in passes, in this order, into one colour target, one id buffer (cleared
+//! by the first overlay pass; the terrain writes no ids) and (but for the last) one depth
+//! buffer, which the terrain leaves behind (Kaiser 2018, 5.3):
 //!
 //! | pass | what | depth |
 //! |---|---|---|

@@ -28,6 +28,7 @@ use globus_tiling::{TileKey, TilingScheme};
 pub struct TerrainHeight {
     height_m: f64,
     level: u8,
+    error_m: f64,
 }
 
 impl TerrainHeight {
@@ -40,21 +41,30 @@ impl TerrainHeight {
     pub fn level(&self) -> u8 {
         self.level
     }
+
+    /// The largest geometric error of those tiles, true metres: how far their surface may be
+    /// from the full-resolution ground it stands for.
+    pub fn error_m(&self) -> f64 {
+        self.error_m
+    }
 }
 
 /// Samples per tile side minus one.
 const CELLS: u64 = MESH_SEGMENTS as u64;
 
-/// The height of one global sample of `level`, from the tile that owns it or, on an edge,
-/// the neighbour that shares it.
-fn sample(layer: &TerrainLayer, level: u8, gi: u64, gj: u64) -> Option<f32> {
+/// The height of one global sample of `level` and the geometric error of the tile it was
+/// read from: the tile that owns it or, on an edge, the neighbour that shares it.
+fn sample(layer: &TerrainLayer, level: u8, gi: u64, gj: u64) -> Option<(f32, f64)> {
     let scheme = TilingScheme::Geographic;
     let (ntx, nty) = (scheme.tiles_x(level), scheme.tiles_y(level));
     let read = |tx: u64, ty: u64| {
         let key = TileKey::try_new(level, tx as u32, ty as u32)?;
         let data = layer.get(key)?;
         let (i, j) = (gi - tx * CELLS, gj - ty * CELLS);
-        Some(data.tile.height_at(i as i32, j as i32))
+        Some((
+            data.tile.height_at(i as i32, j as i32),
+            data.tile.geometric_error_m,
+        ))
     };
     let owner = |g: u64, n: u64| (g / CELLS).min(n - 1);
     let (tx, ty) = (owner(gi, ntx), owner(gj, nty));
@@ -104,10 +114,14 @@ pub(crate) fn height_at(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Opt
         let (fx, fy) = (x - i0 as f64, y - j0 as f64);
         let corners = [(i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)];
         let mut h = [0.0f64; 4];
+        let mut error_m: f64 = 0.0;
         let mut complete = true;
         for (k, &(gi, gj)) in corners.iter().enumerate() {
             match sample(layer, level, gi, gj) {
-                Some(v) => h[k] = f64::from(v),
+                Some((v, e)) => {
+                    h[k] = f64::from(v);
+                    error_m = error_m.max(e);
+                }
                 None => {
                     complete = false;
                     break;
@@ -120,6 +134,7 @@ pub(crate) fn height_at(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Opt
             return Some(TerrainHeight {
                 height_m: top * (1.0 - fy) + bottom * fy,
                 level,
+                error_m,
             });
         }
     }

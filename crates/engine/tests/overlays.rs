@@ -10,20 +10,13 @@ use common::{Marker, Markers, marker_centroid, marker_pixels};
 use globus_engine::{
     CameraSpec, Cartographic, DVec3, GlobeBuilder, Headless, OverlayPass, View, save_png,
 };
-use globus_tiling::TilingScheme;
 
 const TIMEOUT: Duration = Duration::from_secs(240);
 const SIZE: (u32, u32) = (640, 360);
 
+/// A camera `alt` metres above the ground.
 fn camera(lon: f64, lat: f64, alt: f64, heading: f64, pitch: f64) -> CameraSpec {
-    CameraSpec {
-        lon_deg: lon,
-        lat_deg: lat,
-        alt_m: alt,
-        heading_deg: heading,
-        pitch_deg: pitch,
-        above_ground: true,
-    }
+    common::camera(lon, lat, alt, heading, pitch, true)
 }
 
 /// The procedural planet at `cam`, every tile loaded.
@@ -273,19 +266,10 @@ fn picking_returns_the_object_and_the_ground_under_the_cursor() {
         );
         let c = e.ecef_to_cartographic(p).expect("on the body");
         let truth = globe.ground_height_m(c.lon_rad, c.lat_rad);
-        let level = globe
+        let error = globe
             .height_at(c.lon_rad, c.lat_rad)
             .expect("loaded")
-            .level();
-        let key = TilingScheme::Geographic
-            .tile_at(c.lon_rad, c.lat_rad, level)
-            .expect("tile");
-        let error = globe
-            .layer()
-            .get(key)
-            .expect("loaded")
-            .tile
-            .geometric_error_m;
+            .error_m();
         assert!(
             (c.height_m - truth).abs() <= error,
             "({x}, {y}): picked {:.2} m, ground {truth:.2} m, tile error {error:.2} m",

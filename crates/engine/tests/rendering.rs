@@ -2,32 +2,17 @@
 //! against geometry computed independently in f64, and written to
 //! `target/test-output/rendering/` to be looked at.
 
+mod common;
+
 use std::time::Duration;
 
+use common::camera;
 use globus_engine::{
     CameraSpec, Ellipsoid, GlobeBuilder, Headless, RenderedFrame, RgbaImage, View, holes_inside,
     save_png,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
-
-fn camera(
-    lon: f64,
-    lat: f64,
-    alt: f64,
-    heading: f64,
-    pitch: f64,
-    above_ground: bool,
-) -> CameraSpec {
-    CameraSpec {
-        lon_deg: lon,
-        lat_deg: lat,
-        alt_m: alt,
-        heading_deg: heading,
-        pitch_deg: pitch,
-        above_ground,
-    }
-}
 
 fn render(name: &str, cam: CameraSpec, width: u32, height: u32) -> (RenderedFrame, View) {
     let mut off = Headless::new(&GlobeBuilder::new(), width, height).expect("a GPU or lavapipe");

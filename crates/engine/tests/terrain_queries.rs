@@ -171,6 +171,58 @@ fn heights_match_the_srtm_tile_and_agree_across_tile_edges() {
     );
 }
 
+/// Normals of the drawn surface against the SRTM tile's own slopes taken the same distance
+/// apart: the slope a normal stands for (rise over run along east and north), divided by the
+/// exaggeration, is the true slope, plain and raised 100 times.
+#[test]
+fn normals_follow_the_srtm_slopes_plain_and_raised() {
+    let hgt = Hgt::read();
+    let e = Ellipsoid::WGS84;
+    let mut mean_errors = Vec::new();
+    for factor in [1.0, 100.0] {
+        let off = srtm_globe(factor);
+        let globe = off.globe();
+        let (mut sum, mut worst, mut n, mut steep) = (0.0, 0.0f64, 0, 0);
+        for i in 0..=10 {
+            for j in 0..=10 {
+                let (lon, lat) = (11.93 + 0.004 * f64::from(i), 57.68 + 0.004 * f64::from(j));
+                let (lon_r, lat_r) = (lon.to_radians(), lat.to_radians());
+                let normal = globe.normal_at(lon_r, lat_r).expect("loaded");
+                let level = globe.height_at(lon_r, lat_r).expect("loaded").level();
+                let enu = e.enu_frame(lon_r, lat_r);
+                // The slope the normal stands for, in true metres per metre.
+                let up = normal.dot(enu.up);
+                let slope = (
+                    -normal.dot(enu.east) / up / factor,
+                    -normal.dot(enu.north) / up / factor,
+                );
+                // The SRTM's, one sample spacing of that level to each side.
+                let step = 180.0 / f64::from(1u32 << level) / 32.0;
+                let metres = step.to_radians() * e.mean_radius();
+                let reference = (
+                    (hgt.height(lon + step, lat) - hgt.height(lon - step, lat))
+                        / (2.0 * metres * lat_r.cos()),
+                    (hgt.height(lon, lat + step) - hgt.height(lon, lat - step)) / (2.0 * metres),
+                );
+                let d = (slope.0 - reference.0).hypot(slope.1 - reference.1);
+                steep += usize::from(reference.0.hypot(reference.1) > 0.05);
+                sum += d;
+                worst = worst.max(d);
+                n += 1;
+            }
+        }
+        let mean = sum / f64::from(n);
+        println!(
+            "normals, exaggeration {factor}: slopes off the SRTM's by {mean:.4} on average, {worst:.4} at worst ({steep} of {n} steeper than 5 %)"
+        );
+        assert!(steep > 10, "a flat test area");
+        assert!(mean < 0.02 && worst < 0.1, "x{factor}: mean {mean:.4}, worst {worst:.4}");
+        mean_errors.push(mean);
+    }
+    // Raised, the drawn slopes are 100 times steeper, and no less faithful.
+    assert!(mean_errors[1] < 2.0 * mean_errors[0] + 0.005, "{mean_errors:?}");
+}
+
 /// Exaggeration 100 over real mountains of real data: true heights from the queries, drawn
 /// heights 100 times, bounds holding the raised vertices, and nothing visible culled.
 #[test]
@@ -185,19 +237,8 @@ fn exaggeration_raises_meshes_bounds_and_culling_together() {
     );
     // Queries answer true heights; the raised surface's errors are 100 times larger in drawn
     // metres, so LOD selection refined it further.
-    let error = |off: &Headless, level| {
-        let key = TilingScheme::Geographic
-            .tile_at(lon, lat, level)
-            .expect("tile");
-        off.globe()
-            .layer()
-            .get(key)
-            .expect("loaded")
-            .tile
-            .geometric_error_m
-    };
     assert!(
-        (a.height_m() - b.height_m()).abs() <= error(&plain, a.level()) + error(&raised, b.level()),
+        (a.height_m() - b.height_m()).abs() <= a.error_m() + b.error_m(),
         "{} m at level {} vs {} m at level {}",
         a.height_m(),
         a.level(),

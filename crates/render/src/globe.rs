@@ -4,8 +4,8 @@
 //! 1. [`GlobeRenderer::prepare`] (CPU): writes the frame uniforms, each drawn tile's
 //!    centre-to-eye offset (subtracted in f64, then rounded to f32) at its pool slot, and one
 //!    indirect draw record per drawn tile (its index range and base vertex in the pools).
-//! 2. [`GlobeRenderer::draw`] (GPU): records, into a render pass the caller began (colour,
-//!    id buffer and depth, see [`crate::FrameFormats`]), the sky with a full-screen triangle,
+//! 2. [`GlobeRenderer::draw`] (GPU): records, into a render pass the caller began (colour and
+//!    depth, see [`crate::FrameFormats::terrain_targets`]), the sky with a full-screen triangle,
 //!    then every terrain tile, whatever its mesh, with one `multi_draw_indexed_indirect` over
 //!    the shared vertex and index pools. Each vertex carries its slot, which picks its offset and its
 //!    colour: a layer of the colour pool and the part of it over the tile (its own layer
@@ -320,7 +320,7 @@ impl GlobeRenderer {
     }
 
     /// GPU phase: records the sky and the terrain prepared last into `pass`, a pass over
-    /// the frame's colour, id and depth targets that the caller began (clearing depth to 0,
+    /// the frame's colour and depth targets that the caller began (clearing depth to 0,
     /// infinitely far, and colour as it likes) and may go on drawing into.
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
@@ -480,7 +480,7 @@ fn terrain_pipeline(
             module: &module,
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
-            targets: &formats.colour_targets(None, false),
+            targets: &formats.terrain_targets(),
         }),
         multiview_mask: None,
         cache: None,
@@ -523,7 +523,7 @@ fn sky_pipeline(
             module: &module,
             entry_point: Some("fs_sky"),
             compilation_options: Default::default(),
-            targets: &formats.colour_targets(None, false),
+            targets: &formats.terrain_targets(),
         }),
         multiview_mask: None,
         cache: None,

@@ -167,6 +167,12 @@ impl Residency {
         self.frame += 1;
     }
 
+    /// Whether `key` is resident (one lookup in a small map: what LOD selection asks of every
+    /// loaded tile it visits).
+    pub fn contains(&self, key: TileKey) -> bool {
+        self.slot_of.contains_key(&key)
+    }
+
     /// The resident tile `key`.
     pub fn get(&self, key: TileKey) -> Option<&Resident> {
         let slot = *self.slot_of.get(&key)?;

@@ -18,8 +18,10 @@ pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 /// The colour format of offscreen frames.
 pub const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
-/// The attachments every pipeline drawing into a Globus frame must declare: colour at
-/// location 0, the id buffer at location 1, and (except in screen-space passes) depth.
+/// The attachments pipelines drawing into a Globus frame declare. Overlays: colour at
+/// location 0, the id buffer at location 1, and (except in screen-space passes) depth. The
+/// terrain pass has colour and depth only (the id buffer is cleared by the first overlay
+/// pass, so a frame without overlays pays nothing for it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FrameFormats {
     /// The colour target's format (the window surface's, or [`OFFSCREEN_FORMAT`]).
@@ -66,6 +68,15 @@ impl FrameFormats {
                 },
             }),
         ]
+    }
+
+    /// The colour target of the terrain pass (sky and tiles, opaque, no ids).
+    pub fn terrain_targets(&self) -> [Option<wgpu::ColorTargetState>; 1] {
+        [Some(wgpu::ColorTargetState {
+            format: self.colour,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })]
     }
 
     /// Depth testing against the shared reversed-Z buffer (nearer is greater), optionally
@@ -210,22 +221,8 @@ impl FrameTargets {
     /// Depth and id buffers of `width` x `height` pixels.
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
         let (width, height) = (width.max(1), height.max(1));
-        let texture = |label, format, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | usage,
-                view_formats: &[],
-            })
-        };
+        let texture =
+            |label, format, usage| target_texture(device, label, (width, height), format, usage);
         let depth = texture(
             "frame depth",
             DEPTH_FORMAT,
@@ -328,6 +325,30 @@ impl FrameTargets {
     }
 }
 
+/// A 2D texture to render into, of `size` pixels, with `usage` besides that.
+fn target_texture(
+    device: &wgpu::Device,
+    label: &str,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | usage,
+        view_formats: &[],
+    })
+}
+
 /// Maps a readback buffer the GPU has been told to fill and copies its bytes out.
 fn map_and_read(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
     let slice = buffer.slice(..);
@@ -388,20 +409,13 @@ impl OffscreenTarget {
 
     /// A target of `width` x `height` pixels.
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
-        let colour = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("offscreen colour"),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: OFFSCREEN_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        let colour = target_texture(
+            device,
+            "offscreen colour",
+            (width, height),
+            OFFSCREEN_FORMAT,
+            wgpu::TextureUsages::COPY_SRC,
+        );
         let colour_view = colour.create_view(&wgpu::TextureViewDescriptor::default());
         Self {
             colour,

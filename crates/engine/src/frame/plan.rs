@@ -61,7 +61,7 @@ impl FramePlan {
         for r in &selection.requests {
             if layer.get(r.key).is_none() {
                 self.to_load.push(*r);
-            } else if residency.get(r.key).is_none() {
+            } else if !residency.contains(r.key) {
                 self.to_upload.push(*r);
             }
         }

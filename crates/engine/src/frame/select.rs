@@ -21,7 +21,7 @@ impl TileOracle for ResidentOracle<'_> {
 
     fn tile(&self, key: TileKey) -> TileInfo {
         let mut info = self.layer.tile(key);
-        if info.state == TileState::Loaded && self.residency.get(key).is_none() {
+        if info.state == TileState::Loaded && !self.residency.contains(key) {
             info.state = TileState::Unloaded;
         }
         info

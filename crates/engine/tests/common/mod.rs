@@ -4,7 +4,26 @@
 #![allow(dead_code)] // each test file uses its own subset
 
 use bytemuck::{Pod, Zeroable};
-use globus_engine::{DVec3, FrameContext, Overlay, OverlayPass, RgbaImage};
+use globus_engine::{CameraSpec, DVec3, FrameContext, Overlay, OverlayPass, RgbaImage};
+
+/// A camera in degrees and metres (`alt` above the ground if `above_ground`).
+pub fn camera(
+    lon: f64,
+    lat: f64,
+    alt: f64,
+    heading: f64,
+    pitch: f64,
+    above_ground: bool,
+) -> CameraSpec {
+    CameraSpec {
+        lon_deg: lon,
+        lat_deg: lat,
+        alt_m: alt,
+        heading_deg: heading,
+        pitch_deg: pitch,
+        above_ground,
+    }
+}
 
 /// A disc drawn at a world point.
 #[derive(Clone, Copy, Debug)]
