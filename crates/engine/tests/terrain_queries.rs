@@ -216,11 +216,17 @@ fn normals_follow_the_srtm_slopes_plain_and_raised() {
             "normals, exaggeration {factor}: slopes off the SRTM's by {mean:.4} on average, {worst:.4} at worst ({steep} of {n} steeper than 5 %)"
         );
         assert!(steep > 10, "a flat test area");
-        assert!(mean < 0.02 && worst < 0.1, "x{factor}: mean {mean:.4}, worst {worst:.4}");
+        assert!(
+            mean < 0.02 && worst < 0.1,
+            "x{factor}: mean {mean:.4}, worst {worst:.4}"
+        );
         mean_errors.push(mean);
     }
     // Raised, the drawn slopes are 100 times steeper, and no less faithful.
-    assert!(mean_errors[1] < 2.0 * mean_errors[0] + 0.005, "{mean_errors:?}");
+    assert!(
+        mean_errors[1] < 2.0 * mean_errors[0] + 0.005,
+        "{mean_errors:?}"
+    );
 }
 
 /// Exaggeration 100 over real mountains of real data: true heights from the queries, drawn
