@@ -144,8 +144,8 @@ pub struct RenderArgs {
     pub stats: Option<PathBuf>,
     #[command(flatten)]
     pub globe: GlobeArgs,
-    /// Give up waiting for tiles after this many seconds.
-    #[arg(long, default_value_t = 300.0)]
+    /// Give up waiting for tiles after this many seconds (at most a day).
+    #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
     pub timeout_s: f64,
 }
 

@@ -45,6 +45,37 @@ fn tune_allocator() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn tune_allocator() {}
 
+/// Gives the GPU drivers a private runtime directory when the environment has none that is
+/// usable: without one, every device start on Linux prints "error: XDG_RUNTIME_DIR is invalid
+/// or not set in the environment." (the Wayland client library, which Mesa's Vulkan driver
+/// loads), although nothing fails. Runs first in `main`, before any other thread exists.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn ensure_runtime_dir() {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    // Files under /proc/self belong to the process's user.
+    let Ok(me) = std::fs::metadata("/proc/self").map(|m| m.uid()) else {
+        return;
+    };
+    let usable = |dir: &std::path::Path| {
+        std::fs::metadata(dir).is_ok_and(|m| m.is_dir() && m.uid() == me && m.mode() & 0o077 == 0)
+    };
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| usable(d.as_ref())) {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("globus-runtime-{me}"));
+    let _ = std::fs::create_dir(&dir);
+    let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+    if usable(&dir) {
+        // SAFETY: called at the start of `main`, before any other thread is started, so no
+        // other thread reads the environment while it changes.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn ensure_runtime_dir() {}
+
 /// Logs to stderr, filtered by `RUST_LOG` (e.g. `RUST_LOG=globus_stream=debug`); warnings
 /// and errors only when it is not set.
 fn init_logging() {
@@ -58,6 +89,7 @@ fn init_logging() {
 }
 
 fn main() {
+    ensure_runtime_dir();
     tune_allocator();
     init_logging();
     let cli = match Cli::try_parse() {
@@ -79,8 +111,19 @@ fn main() {
                     },
                 );
             }
+            // clap's first paragraph, on one line (it names the missing arguments on the lines
+            // after the first).
             let text = e.to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
+            let first: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty())
+                .map(str::trim)
+                .collect();
+            let first = if first.is_empty() {
+                "invalid arguments".to_string()
+            } else {
+                first.join(" ")
+            };
             eprintln!(
                 "globus: {} (see globus --help)",
                 first.trim_start_matches("error: ")

@@ -3,8 +3,10 @@
 
 use std::time::Duration;
 
+use std::io::IsTerminal;
+
 use anyhow::Context;
-use globus_engine::{Headless, save_png};
+use globus_engine::{FrameReport, Headless, save_png};
 use serde_json::json;
 
 use crate::args::{self, RenderArgs};
@@ -13,14 +15,22 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
     let camera = args::parse_camera(&a.camera, a.above_ground)?;
     let builder = args::globe_builder(&a.globe)?;
+    if !(a.timeout_s > 0.0 && a.timeout_s <= 86_400.0) {
+        anyhow::bail!(
+            "--timeout-s {} must be a number of seconds above 0 and at most a day (86400)",
+            a.timeout_s
+        );
+    }
     args::check_writable(&a.out)?;
     if let Some(s) = &a.stats {
         args::check_writable(s)?;
     }
     let mut off = Headless::new(&builder, width, height)?;
-    let timeout = Duration::from_secs_f64(a.timeout_s.max(0.0));
+    let timeout = Duration::from_secs_f64(a.timeout_s);
     let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);
-    let mut frame = off.render_complete(&view, timeout, &mut [])?;
+    let progress = LoadProgress::new();
+    let mut show = |r: &FrameReport| progress.show(r);
+    let mut frame = off.render_complete_reporting(&view, timeout, &mut [], &mut show)?;
     // Above the ground of streamed data: the ground is known once the tiles under the
     // camera have loaded, so place the camera again and finish the picture from there.
     for _ in 0..3 {
@@ -29,8 +39,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             break;
         }
         view = placed;
-        frame = off.render_complete(&view, timeout, &mut [])?;
+        frame = off.render_complete_reporting(&view, timeout, &mut [], &mut show)?;
     }
+    progress.finish();
     if !frame.complete {
         tracing::warn!(
             "gave up waiting for tiles after {:.1} s; the picture is coarser than the SSE bound asks",
@@ -73,4 +84,34 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+/// Tiles drawn and still loading, on one line of stderr while the picture completes, if
+/// stderr is a terminal (nothing otherwise).
+struct LoadProgress(Option<indicatif::ProgressBar>);
+
+impl LoadProgress {
+    fn new() -> Self {
+        if !std::io::stderr().is_terminal() {
+            return Self(None);
+        }
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.enable_steady_tick(Duration::from_millis(200));
+        Self(Some(bar))
+    }
+
+    fn show(&self, r: &FrameReport) {
+        if let Some(bar) = &self.0 {
+            bar.set_message(format!(
+                "{} tiles drawn, {} still loading, {} showing their parent's imagery",
+                r.draw.tiles, r.wanted, r.colours_pending
+            ));
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.0 {
+            bar.finish_and_clear();
+        }
+    }
 }

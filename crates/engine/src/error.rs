@@ -44,6 +44,16 @@ pub enum EngineError {
         /// What it must be.
         expected: &'static str,
     },
+    /// A frame the device cannot draw (larger than its largest texture).
+    #[error("a frame of {width}x{height} pixels: this device draws 1 to {largest} pixels a side")]
+    FrameSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The device's largest texture side.
+        largest: u32,
+    },
     /// The GPU could not do what was asked (no adapter, a failed readback).
     #[error(transparent)]
     Render(#[from] globus_render::RenderError),

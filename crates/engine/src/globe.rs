@@ -593,6 +593,17 @@ impl Globe {
     /// Frames until everything the selection wants is loaded and resident, imagery included
     /// (or `timeout`). Returns the last frame's report and whether it completed.
     pub fn load_completely(&mut self, view: &View, timeout: Duration) -> (FrameReport, bool) {
+        self.load_completely_reporting(view, timeout, &mut |_| {})
+    }
+
+    /// [`Globe::load_completely`], handing every frame's report to `on_frame` (to show
+    /// progress: tiles drawn, still wanted, imagery loading).
+    pub fn load_completely_reporting(
+        &mut self,
+        view: &View,
+        timeout: Duration,
+        on_frame: &mut dyn FnMut(&FrameReport),
+    ) -> (FrameReport, bool) {
         let deadline = Instant::now() + timeout;
         self.set_uploads_per_frame(u32::MAX);
         // Start from the configured bound and only raise it if budgets force it, so the same
@@ -603,6 +614,7 @@ impl Globe {
         loop {
             let sse_before = self.selection_options.max_sse_px;
             let report = self.update(view);
+            on_frame(&report);
             if report.is_complete() {
                 return (report, true);
             }

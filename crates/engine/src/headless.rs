@@ -36,6 +36,14 @@ impl Headless {
         let mut builder = builder.clone();
         builder.open_sources()?.viewport(width, height);
         let gpu = GpuContext::headless()?;
+        let largest = gpu.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > largest || height > largest {
+            return Err(EngineError::FrameSize {
+                width,
+                height,
+                largest,
+            });
+        }
         // The target before the globe: a memory budget counts it in the process's footprint.
         let target = OffscreenTarget::new(&gpu.device, width, height);
         let globe = builder.build(&gpu, OffscreenTarget::FORMAT)?;
@@ -75,8 +83,22 @@ impl Headless {
         timeout: Duration,
         overlays: &mut [&mut dyn Overlay],
     ) -> Result<RenderedFrame, EngineError> {
+        self.render_complete_reporting(view, timeout, overlays, &mut |_| {})
+    }
+
+    /// [`Headless::render_complete`], handing the report of every frame it waits through to
+    /// `on_frame` (for a progress display).
+    pub fn render_complete_reporting(
+        &mut self,
+        view: &View,
+        timeout: Duration,
+        overlays: &mut [&mut dyn Overlay],
+        on_frame: &mut dyn FnMut(&FrameReport),
+    ) -> Result<RenderedFrame, EngineError> {
         let started = Instant::now();
-        let (_, complete) = self.globe.load_completely(view, timeout);
+        let (_, complete) = self
+            .globe
+            .load_completely_reporting(view, timeout, on_frame);
         let load_ms = started.elapsed().as_secs_f64() * 1e3;
         // A final frame on the complete data, timed on its own.
         let report = self.globe.update(view);

@@ -235,7 +235,7 @@ impl FromStr for TilingScheme {
                 Ok(TilingScheme::WebMercator)
             }
             _ => Err(ParseTileNameError(format!(
-                "unknown tiling scheme {s:?}: expected geographic or webmercator"
+                "unknown tiling scheme {s:?}: expected geographic (or epsg:4326, 4326) or webmercator (or web-mercator, mercator, epsg:3857, 3857)"
             ))),
         }
     }

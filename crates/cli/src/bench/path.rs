@@ -12,6 +12,9 @@ use super::quantiles;
 use crate::args::{self, BenchArgs};
 use crate::path::CameraPath;
 
+/// The most frames a path is replayed for.
+const MAX_FRAMES: usize = 1_000_000;
+
 /// What one frame of the path cost and showed.
 #[derive(Clone, Copy, Debug)]
 struct FrameSample {
@@ -86,7 +89,18 @@ pub fn run(
     }
     // Counting starts with the path.
     off.globe_mut().layer_mut().track_usage();
-    let frames = (path.duration() * a.fps).floor() as usize + 1;
+    // A path of a day at 30 fps is 2.6 million frames: refuse what no benchmark means
+    // before allocating a sample per frame.
+    let frames_f = (path.duration() * a.fps).floor() + 1.0;
+    if frames_f.is_nan() || frames_f > MAX_FRAMES as f64 {
+        anyhow::bail!(
+            "{}: {:.0} s at {} fps is {frames_f:.0} frames; at most {MAX_FRAMES} are replayed",
+            path_file.display(),
+            path.duration(),
+            a.fps
+        );
+    }
+    let frames = frames_f as usize;
     let mut samples: Vec<FrameSample> = Vec::with_capacity(frames);
     let mut deferred = 0u64;
     let clock = Instant::now();

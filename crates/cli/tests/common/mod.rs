@@ -6,12 +6,14 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// Runs `globus` with `args`, without a display (so `view` fails at once instead of opening).
+/// Runs `globus` with `args`, without a display (so `view` fails at once instead of opening)
+/// and without a runtime directory, as on a fresh machine's console: the binary makes its own.
 pub fn globus(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_globus"))
         .args(args)
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
+        .env_remove("XDG_RUNTIME_DIR")
         .output()
         .expect("run globus")
 }
