@@ -171,6 +171,16 @@ impl Config {
             if h.per_host == Some(0) {
                 bail!("http.per_host must be at least 1");
             }
+            let mut http = globus_stream::fetch::HttpOptions::default();
+            if let Some(ua) = &h.user_agent {
+                http.user_agent = ua.clone();
+            }
+            http.headers = h
+                .headers
+                .iter()
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect();
+            http.check().map_err(|e| anyhow::anyhow!("[http]: {e}"))?;
             if let Some(t) = h.timeout_s
                 && !(t > 0.0 && t <= 600.0)
             {
@@ -330,6 +340,10 @@ mod tests {
             "memory_mb = 0",
             "memory_mb = 512\ncache_mb = 256",
             "memory_mb = 512\ngpu_tiles = 256",
+            // CR/LF would split the request (the loader threads panicked on it before).
+            "[http]\nuser_agent = \"me\\r\\nX-Evil: 1\"",
+            "[http]\nheaders = { \"X-Key\" = \"a\\nb\" }",
+            "[http]\nheaders = { \"Bad Name\" = \"v\" }",
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }

@@ -283,3 +283,37 @@ fn render_writes_a_png_and_stats() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A CR/LF in a header from the config split every request and panicked the loader threads
+/// (the run exited 0 without terrain): now refused when the config is read.
+#[test]
+fn a_header_with_cr_lf_in_the_config_is_refused_when_it_is_read() {
+    let dir = std::env::temp_dir().join(format!("globus-cli-crlf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("x.png");
+    for (name, toml) in [
+        ("ua.toml", "[http]\nuser_agent = \"me\\r\\nX-Evil: 1\"\n"),
+        (
+            "header.toml",
+            "[http]\nheaders = { \"X-Key\" = \"a\\nb\" }\n",
+        ),
+    ] {
+        let config = dir.join(name);
+        std::fs::write(&config, toml).unwrap();
+        fails_with_one_line(
+            &[
+                "render",
+                "--camera",
+                "0,0,1000,0,0",
+                "--size",
+                "64x64",
+                "--out",
+                png.to_str().unwrap(),
+                "--config",
+                config.to_str().unwrap(),
+            ],
+            &[name, "control characters"],
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

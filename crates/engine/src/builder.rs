@@ -387,6 +387,7 @@ impl GlobeBuilder {
                 "must be a number of frames from 0 to 1000",
             ));
         }
+        self.http.check().map_err(EngineError::Http)?;
         if self.memory_bytes == Some(0) {
             return Err(invalid("memory budget", 0.0, "must be above 0"));
         }

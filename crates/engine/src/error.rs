@@ -15,6 +15,9 @@ pub enum EngineError {
         #[source]
         error: globus_stream::fetch::OpenError,
     },
+    /// The HTTP settings cannot be sent (control characters in a header, say).
+    #[error("HTTP settings: {0}")]
+    Http(#[source] globus_stream::fetch::OpenError),
     /// The layers opened but cannot be combined into a terrain source.
     #[error("the terrain and imagery layers cannot be combined: {0}")]
     Layers(#[source] globus_stream::fetch::OpenError),

@@ -48,6 +48,43 @@ pub struct HttpOptions {
     pub max_body_bytes: u64,
 }
 
+impl HttpOptions {
+    /// Refuses what cannot go into a request: a User-Agent or header value with control
+    /// characters (a CR or LF would split the request, and the HTTP library refuses it on every
+    /// tile), a header name that is not an HTTP token, no requests in flight.
+    pub fn check(&self) -> Result<(), OpenError> {
+        let bad_value = |v: &str| v.chars().any(|c| c.is_control() && c != '\t');
+        if bad_value(&self.user_agent) {
+            return Err(OpenError::Spec(format!(
+                "User-Agent {:?} holds control characters (CR, LF): not allowed in an HTTP header",
+                self.user_agent
+            )));
+        }
+        for (name, value) in &self.headers {
+            let token = !name.is_empty()
+                && name
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b"!#$%&'*+-.^_`|~".contains(&b));
+            if !token {
+                return Err(OpenError::Spec(format!(
+                    "header name {name:?} is not an HTTP token (letters, digits, - and the like)"
+                )));
+            }
+            if bad_value(value) {
+                return Err(OpenError::Spec(format!(
+                    "header {name}: value {value:?} holds control characters (CR, LF): not allowed in an HTTP header"
+                )));
+            }
+        }
+        if self.per_host == 0 {
+            return Err(OpenError::Spec(
+                "at least one request per host must be allowed in flight".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for HttpOptions {
     fn default() -> Self {
         Self {
@@ -387,6 +424,35 @@ impl Fetch for TemplateFetch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A CR or LF in a header would split the request (the loader threads panicked on every
+    /// tile): refused up front, naming the header.
+    #[test]
+    fn headers_that_cannot_be_sent_are_refused() {
+        assert!(HttpOptions::default().check().is_ok());
+        let with = |ua: &str, headers: &[(&str, &str)]| HttpOptions {
+            user_agent: ua.into(),
+            headers: headers
+                .iter()
+                .map(|(k, v)| ((*k).to_string(), (*v).to_string()))
+                .collect(),
+            ..HttpOptions::default()
+        };
+        assert!(
+            with("app/1 (me@example.org)", &[("X-Api-Key", "k 1")])
+                .check()
+                .is_ok()
+        );
+        for (o, needle) in [
+            (with("me\r\nX-Evil: 1", &[]), "User-Agent"),
+            (with("me", &[("X-Key", "a\nb")]), "X-Key"),
+            (with("me", &[("Bad Name", "v")]), "Bad Name"),
+            (with("me", &[("", "v")]), "header name"),
+        ] {
+            let e = o.check().expect_err(needle).to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
 
     #[test]
     fn http_dates_and_cache_headers() {
