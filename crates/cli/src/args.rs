@@ -252,7 +252,7 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
              sizes them too (cache_mb or gpu_tiles)"
         ),
         Some(mb) => {
-            builder.memory_budget(Some(mb << 20));
+            builder.memory_budget(Some(mb.saturating_mul(1 << 20)));
         }
         None if !caches_sized && builder.memory_budget_bytes().is_none() => {
             builder.memory_budget(Some(DEFAULT_MEMORY_MB << 20));
@@ -263,8 +263,8 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
         builder.max_sse_px(sse);
     }
     let sse = builder.error_bound_px();
-    if !(sse > 0.0 && sse <= 1000.0) {
-        bail!("--sse {sse} must be a pixel error above 0 and at most 1000");
+    if !(globus_engine::MIN_SSE_PX..=1000.0).contains(&sse) {
+        bail!("--sse {sse}: the error bound must be a pixel error from 0.1 to 1000");
     }
     if !(a.fov_deg > 0.5 && a.fov_deg < 170.0) {
         bail!(
@@ -369,10 +369,6 @@ pub fn parse_camera(s: &str, above_ground: bool) -> anyhow::Result<CameraSpec> {
 
 /// Fails early, with the path, if a file cannot be written there.
 pub fn check_writable(path: &Path) -> anyhow::Result<()> {
-    std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .map(drop)
+    globus_tiling::files::check_writable(path)
         .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -102,6 +102,40 @@ pub struct DiskCacheConfig {
     pub max_mb: Option<u64>,
 }
 
+/// The largest disk cache, MiB (16 TiB).
+pub const MAX_DISK_CACHE_MB: u64 = 16 << 20;
+
+/// One line for a TOML error: the file, the line of the key at fault and the reason. The
+/// `toml` crate points errors of the top-level table at line 1, column 1 and puts the reason
+/// on a later line; the line is found from the key the message names where it can be.
+fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> anyhow::Error {
+    let message = e.message().trim().replace('\n', " ");
+    let line_of = |at: usize| text[..at.min(text.len())].matches('\n').count() + 1;
+    // A key named in backticks (`unknown field `memroy_mb``, `missing field `url``).
+    let named = message
+        .split('`')
+        .nth(1)
+        .filter(|k| !k.is_empty() && !k.contains(' '))
+        .and_then(|key| {
+            text.lines().position(|l| {
+                let l = l.trim_start();
+                l.strip_prefix(key)
+                    .is_some_and(|rest| rest.trim_start().starts_with('='))
+            })
+        })
+        .map(|i| i + 1);
+    let line = match (e.span(), named) {
+        (Some(span), _) if span.start > 0 => Some(line_of(span.start)),
+        (_, Some(l)) => Some(l),
+        (Some(span), None) => Some(line_of(span.start)),
+        (None, None) => None,
+    };
+    match line {
+        Some(l) => anyhow::anyhow!("{}: line {l}: {message}", path.display()),
+        None => anyhow::anyhow!("{}: {message}", path.display()),
+    }
+}
+
 /// Default size of the disk cache, MiB.
 pub const DEFAULT_DISK_CACHE_MB: u64 = 2048;
 
@@ -109,7 +143,7 @@ pub const DEFAULT_DISK_CACHE_MB: u64 = 2048;
 pub fn disk_cache_options(dir: &Path, max_mb: u64) -> DiskCacheOptions {
     DiskCacheOptions {
         dir: dir.to_path_buf(),
-        max_bytes: max_mb << 20,
+        max_bytes: max_mb.saturating_mul(1 << 20),
         default_fresh_for: Duration::from_secs(7 * 86_400),
     }
 }
@@ -117,22 +151,25 @@ pub fn disk_cache_options(dir: &Path, max_mb: u64) -> DiskCacheOptions {
 impl Config {
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let c: Config = toml::from_str(&text).map_err(|e| {
-            let first = e.to_string();
-            let first = first.lines().next().unwrap_or("invalid TOML").to_string();
-            anyhow::anyhow!("{}: {first}", path.display())
-        })?;
+        let text =
+            globus_tiling::files::read_text_capped(path, globus_tiling::files::MAX_TEXT_BYTES)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+        let c: Config = toml::from_str(&text).map_err(|e| toml_error(path, &text, &e))?;
         c.check().with_context(|| path.display().to_string())?;
         Ok(c)
     }
 
     fn check(&self) -> anyhow::Result<()> {
-        if let Some(s) = self.sse
-            && !(s > 0.0 && s <= 1000.0)
+        if let Some(d) = &self.disk_cache
+            && let Some(mb) = d.max_mb
+            && mb > MAX_DISK_CACHE_MB
         {
-            bail!("sse = {s} must be above 0 and at most 1000 pixels");
+            bail!("disk_cache.max_mb = {mb} is more than {MAX_DISK_CACHE_MB} (16 TiB)");
+        }
+        if let Some(s) = self.sse
+            && !(globus_engine::MIN_SSE_PX..=1000.0).contains(&s)
+        {
+            bail!("sse = {s} must be from 0.1 to 1000 pixels");
         }
         if self.gpu_tiles == Some(0)
             || self.workers == Some(0)
@@ -202,10 +239,10 @@ impl Config {
             builder.max_sse_px(s);
         }
         if let Some(mb) = self.memory_mb {
-            builder.memory_budget(Some(mb << 20));
+            builder.memory_budget(Some(mb.saturating_mul(1 << 20)));
         }
         if let Some(mb) = self.cache_mb {
-            builder.cache_bytes((mb as usize) << 20);
+            builder.cache_bytes(usize::try_from(mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX));
         }
         if let Some(n) = self.gpu_tiles {
             builder.gpu_tiles(n);
@@ -347,5 +384,40 @@ mod tests {
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }
+    }
+
+    /// Every config error said only "TOML parse error at line 1, column 1": now the line of
+    /// the key, the key and what was expected.
+    #[test]
+    fn config_errors_name_the_line_the_key_and_the_reason() {
+        let dir = std::env::temp_dir().join(format!("globus-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for (text, needles) in [
+            (
+                "sse = 2\nmemroy_mb = 512\n",
+                &["line 2", "memroy_mb", "memory_mb"][..],
+            ),
+            ("sse = 'two'\n", &["line 1", "string", "f64"]),
+            ("workers = 4\nmemory_mb = -5\n", &["line 2", "-5"]),
+            ("memory_mb = 1e12\n", &["line 1", "float", "u64"]),
+            (
+                "[http]\nper_host = 4\ntimeout = 3\n",
+                &["line 3", "timeout"],
+            ),
+            (
+                "[disk_cache]\ndir = '/tmp'\nmax_mb = 1000000000\n",
+                &["max_mb", "16 TiB"],
+            ),
+        ] {
+            let path = dir.join("bad.toml");
+            std::fs::write(&path, text).unwrap();
+            let e = format!("{:#}", Config::load(&path).unwrap_err());
+            assert_eq!(e.lines().count(), 1, "{e}");
+            assert!(e.contains("bad.toml"), "{e}");
+            for n in needles {
+                assert!(e.contains(n), "{text:?}: {e} lacks {n:?}");
+            }
+        }
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -55,7 +55,8 @@ pub struct MeshArgs {
 /// Runs `globus mesh` and returns the report.
 pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
     let bytes =
-        std::fs::read(&args.input).with_context(|| format!("reading {}", args.input.display()))?;
+        globus_tiling::files::read_capped(&args.input, globus_tiling::files::MAX_TILE_BYTES)
+            .with_context(|| format!("reading {}", args.input.display()))?;
     if !bytes.starts_with(b"\x89PNG") {
         return describe_quantized_mesh(&args.input, &bytes);
     }
@@ -109,14 +110,14 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
     });
     if let Some(path) = &args.dump {
         let dump = json!({"vertices": mesh.vertices, "triangles": mesh.triangles});
-        std::fs::write(path, dump.to_string())
+        globus_tiling::files::write_atomic(path, dump.to_string().as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(out) = &args.out {
         let (qm, neighbours) = quantize(args, encoding, &grid, &mesh)?;
         report["normals_across_edges"] = json!(neighbours);
         let gzip = out.extension().is_some_and(|e| e == "gz");
-        std::fs::write(out, qm.encode(gzip))
+        globus_tiling::files::write_atomic(out, &qm.encode(gzip))
             .with_context(|| format!("writing {}", out.display()))?;
         report["out"] = json!(out.display().to_string());
     }
@@ -219,11 +220,12 @@ fn border_ring(
         let path = level_dir
             .join(n.x().to_string())
             .join(format!("{}.{ext}", n.y()));
-        let bytes = match std::fs::read(&path) {
-            Ok(bytes) => bytes,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-        };
+        let bytes =
+            match globus_tiling::files::read_capped(&path, globus_tiling::files::MAX_TILE_BYTES) {
+                Ok(bytes) => bytes,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+                Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+            };
         let (grid, _) = read_elevation_png(&path, &bytes, encoding)?;
         if grid.side() != side {
             bail!(

@@ -23,6 +23,13 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     args::check_writable(&a.out)?;
     if let Some(s) = &a.stats {
+        if globus_tiling::files::same_file(s, &a.out) {
+            anyhow::bail!(
+                "--stats {} and --out {} are the same file: the statistics would replace the picture",
+                s.display(),
+                a.out.display()
+            );
+        }
         args::check_writable(s)?;
     }
     let mut off = Headless::new(&builder, width, height)?;
@@ -80,7 +87,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                         "heading": camera.heading_deg, "pitch": camera.pitch_deg},
             "size": [width, height],
         });
-        std::fs::write(path, serde_json::to_string_pretty(&stats)? + "\n")
+        let text = serde_json::to_string_pretty(&stats)? + "\n";
+        globus_tiling::files::write_atomic(path, text.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())

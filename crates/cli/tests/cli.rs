@@ -112,6 +112,15 @@ fn bad_arguments_end_with_one_clear_line() {
             "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --timeout-s NaN",
             "--timeout-s",
         ),
+        // Budgets beyond the machine: refused naming the largest that makes sense.
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --memory-mb 1000000000000",
+            "this machine has",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --sse 1e-300",
+            "error bound",
+        ),
         // The missing argument is named.
         ("geo ecef 7.6 46", "<HEIGHT>"),
         (
@@ -315,5 +324,44 @@ fn a_header_with_cr_lf_in_the_config_is_refused_when_it_is_read() {
             &[name, "control characters"],
         );
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A failed `render --out` over an existing file left it at 0 bytes, and on a full disk a
+/// truncated PNG; `--stats` given the path of `--out` replaced the picture. Now the old file
+/// stays whole (the new one is written beside it and renamed), and the same path is refused.
+#[test]
+fn failed_writes_leave_the_old_file_whole_and_one_path_is_not_two_outputs() {
+    let dir = std::env::temp_dir().join(format!("globus-cli-atomic-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("frame.png");
+    std::fs::write(&png, b"the old picture").unwrap();
+    // Its temporary points at /dev/full: every write fails with "no space left on device".
+    let partial = dir.join("frame.png.partial");
+    let _ = std::fs::remove_file(&partial);
+    std::os::unix::fs::symlink("/dev/full", &partial).unwrap();
+    let render = |out: &std::path::Path, extra: &[&str]| {
+        let mut a = vec![
+            "render",
+            "--camera",
+            "7.6,46,400000,0,-90",
+            "--size",
+            "64x64",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        a.extend(extra);
+        a.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+    };
+    let args = render(&png, &[]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    fails_with_one_line(&args, &["frame.png", "No space left on device"]);
+    assert_eq!(std::fs::read(&png).unwrap(), b"the old picture");
+    assert!(!partial.exists(), "the temporary is left behind");
+    let stats = dir.join("./frame.png");
+    let args = render(&png, &["--stats", stats.to_str().unwrap()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    fails_with_one_line(&args, &["--stats", "same file"]);
+    assert_eq!(std::fs::read(&png).unwrap(), b"the old picture");
     std::fs::remove_dir_all(&dir).ok();
 }

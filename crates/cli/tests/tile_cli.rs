@@ -71,6 +71,19 @@ fn bad_inputs_end_with_one_line_naming_the_file() {
     std::fs::write(&text, "hello").unwrap();
     let missing = dir.join("N00E000.hgt");
     let grey = globus_test_support::shared_data("earth-topology-2048x1024.png");
+    // A FIFO would block the reader for ever; /dev/zero (behind a link) never ends.
+    let fifo = dir.join("world-fifo.jpg");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let zero = dir.join("zero.jpg");
+    let _ = std::fs::remove_file(&zero);
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
     let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
         (
             vec!["dem", "--in", s(&truncated)],
@@ -95,6 +108,22 @@ fn bad_inputs_end_with_one_line_naming_the_file() {
         (
             vec!["dem", "--in", s(&grey)],
             vec!["earth-topology-2048x1024.png", "--height-scale"],
+        ),
+        (
+            vec!["dem", "--in", s(&grey), "--height-scale", "1e30"],
+            vec!["--height-scale", "1e30"],
+        ),
+        (
+            vec!["imagery", "--in", s(&fifo)],
+            vec!["world-fifo.jpg", "not a regular file"],
+        ),
+        (
+            vec!["imagery", "--in", s(&zero)],
+            vec!["zero.jpg", "not a regular file"],
+        ),
+        (
+            vec!["dem", "--in", s(&hgt), "--shard", "0/4000000000"],
+            vec!["--shard", "4000000000", "10000"],
         ),
         (
             vec!["dem", "--in", s(&hgt), "--bounds", "0,0,1,1"],
@@ -288,5 +317,155 @@ fn a_full_disk_ends_with_one_line_and_no_finished_archive() {
     assert!(
         !out.exists(),
         "a failed run left a finished-looking archive"
+    );
+}
+
+/// `--shards 4000000000` aborted on a 96 GB allocation: refused with the largest count.
+#[test]
+fn plan_refuses_more_shards_than_it_can_share_out() {
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    for n in ["4000000000", "1000000", "0"] {
+        fails_with_one_line(
+            &[
+                "tile",
+                "plan",
+                "--shards",
+                n,
+                "dem",
+                "--in",
+                s(&hgt),
+                "--out",
+                "unused",
+            ],
+            &["--shards", n],
+        );
+    }
+}
+
+/// `--threads 10000` was still running at 60 s (0.06 s with the default): capped, with a note.
+#[test]
+fn ten_thousand_threads_are_capped_with_a_note() {
+    let dir = scratch("threads");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let out = dir.join("p");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = globus(&[
+        "tile",
+        "dem",
+        "--in",
+        s(&hgt),
+        "--out",
+        s(&out),
+        "--max-level",
+        "4",
+        "--threads",
+        "10000",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("--threads 10000: using"), "{err}");
+}
+
+/// `tile --force` deleted any non-directory at the output path (a text file; as root,
+/// `/dev/null`): it replaces only its own kind of output, recognised by its first bytes.
+#[test]
+fn force_replaces_only_its_own_kind_of_output() {
+    let dir = scratch("force-kinds");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let notes = dir.join("notes.mbtiles");
+    std::fs::write(&notes, "not a database").unwrap();
+    let plain = dir.join("pyramid");
+    std::fs::write(&plain, "a text file where a pyramid directory would go").unwrap();
+    let fifo = dir.join("pipe.pmtiles");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    for (out, needle) in [
+        (&notes, "not an MBTILES archive"),
+        (&plain, "not a directory"),
+        (&fifo, "not a regular file"),
+    ] {
+        fails_with_one_line(
+            &[
+                "tile",
+                "dem",
+                "--in",
+                s(&hgt),
+                "--out",
+                s(out),
+                "--force",
+                "--max-level",
+                "2",
+            ],
+            &["--force refuses", needle],
+        );
+        assert!(
+            out.symlink_metadata().is_ok(),
+            "{} was deleted",
+            out.display()
+        );
+    }
+    assert_eq!(std::fs::read(&notes).unwrap(), b"not a database");
+    // Its own archive is replaced.
+    let own = dir.join("own.mbtiles");
+    for _ in 0..2 {
+        let o = globus(&[
+            "tile",
+            "dem",
+            "--in",
+            s(&hgt),
+            "--out",
+            s(&own),
+            "--force",
+            "--max-level",
+            "2",
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
+/// Two runs writing one MBTiles both ran to the end and the second then failed with "disk I/O
+/// error": the second is refused at once while the first holds the output.
+#[test]
+fn a_second_run_on_a_busy_output_is_refused_at_once() {
+    let dir = scratch("lock");
+    let hgt = globus_test_support::shared_data("N57E011.hgt");
+    let out = dir.join("busy.mbtiles");
+    // The first run's hold, taken here as `globus tile` takes it.
+    let lock = std::fs::File::create(dir.join("busy.mbtiles.lock")).unwrap();
+    lock.try_lock().unwrap();
+    fails_with_one_line(
+        &[
+            "tile",
+            "dem",
+            "--in",
+            s(&hgt),
+            "--out",
+            s(&out),
+            "--max-level",
+            "2",
+        ],
+        &["busy.mbtiles", "another globus tile is writing it"],
+    );
+    assert!(!out.exists());
+    drop(lock);
+    let o = globus(&[
+        "tile",
+        "dem",
+        "--in",
+        s(&hgt),
+        "--out",
+        s(&out),
+        "--max-level",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        !dir.join("busy.mbtiles.lock").exists(),
+        "the lock file is left behind"
     );
 }

@@ -29,6 +29,9 @@ use crate::{EngineError, Globe};
 /// where the benchmark path dives.
 pub const DEFAULT_SEED: u64 = 24;
 
+/// The smallest screen-space error bound, pixels.
+pub const MIN_SSE_PX: f64 = 0.1;
+
 /// Default of [`GlobeBuilder::request_lookahead_frames`].
 pub const DEFAULT_REQUEST_LOOKAHEAD_FRAMES: f64 = 3.0;
 
@@ -359,11 +362,13 @@ impl GlobeBuilder {
             value: value.to_string(),
             expected,
         };
-        if !(self.max_sse_px > 0.0 && self.max_sse_px <= 1000.0) {
+        // Below a tenth of a pixel no error can be seen, and the cut grows without end
+        // (1e-300 asked for 10 GB of tiles).
+        if !(MIN_SSE_PX..=1000.0).contains(&self.max_sse_px) {
             return Err(invalid(
                 "error bound",
                 self.max_sse_px,
-                "must be a pixel error above 0 and at most 1000",
+                "must be a pixel error from 0.1 to 1000",
             ));
         }
         if !(0.0..=4.0).contains(&self.mesh.error_fraction) {
@@ -390,6 +395,36 @@ impl GlobeBuilder {
         self.http.check().map_err(EngineError::Http)?;
         if self.memory_bytes == Some(0) {
             return Err(invalid("memory budget", 0.0, "must be above 0"));
+        }
+        // Budgets beyond the machine are refused, naming the largest that makes sense.
+        if let Some(ram) = crate::memory::physical_bytes() {
+            let mib = |b: u64| b >> 20;
+            for (option, bytes) in [
+                ("memory budget", self.memory_bytes.unwrap_or(0)),
+                ("tile cache", self.cache_bytes as u64),
+            ] {
+                if bytes > ram {
+                    return Err(EngineError::TooLarge {
+                        option,
+                        value_mib: mib(bytes),
+                        largest_mib: mib(ram),
+                    });
+                }
+            }
+        }
+        if self.gpu_slots == 0 || self.gpu_slots > crate::memory::MAX_GPU_TILES {
+            return Err(invalid(
+                "GPU tiles",
+                f64::from(self.gpu_slots),
+                "must be from 1 to 65536 tile slots",
+            ));
+        }
+        if self.workers == 0 || self.workers > crate::memory::MAX_WORKERS {
+            return Err(invalid(
+                "workers",
+                self.workers as f64,
+                "must be from 1 to 256 loader threads",
+            ));
         }
         if self.uses_real_data() && self.refine_below.is_some() {
             return Err(EngineError::InvalidOption {

@@ -47,6 +47,16 @@ pub enum EngineError {
         /// What it must be.
         expected: &'static str,
     },
+    /// A budget larger than the machine.
+    #[error("{option} of {value_mib} MiB: this machine has {largest_mib} MiB; give at most that")]
+    TooLarge {
+        /// The option's name.
+        option: &'static str,
+        /// The value given, MiB.
+        value_mib: u64,
+        /// The largest that makes sense, MiB.
+        largest_mib: u64,
+    },
     /// A frame the device cannot draw (larger than its largest texture).
     #[error("a frame of {width}x{height} pixels: this device draws 1 to {largest} pixels a side")]
     FrameSize {

@@ -140,18 +140,25 @@ impl Headless {
     }
 }
 
-/// Writes an image as PNG with alpha forced opaque.
+/// Writes an image as PNG with alpha forced opaque, whole or not at all (a failed write leaves
+/// an existing file as it was).
 pub fn save_png(image: &RgbaImage, path: &std::path::Path) -> Result<(), std::io::Error> {
+    use image::ImageEncoder;
     let mut px = image.pixels.clone();
     px.chunks_exact_mut(4).for_each(|p| p[3] = 255);
-    image::save_buffer(
-        path,
-        &px,
-        image.width,
-        image.height,
-        image::ColorType::Rgba8,
-    )
-    .map_err(|e| std::io::Error::other(format!("cannot write {}: {e}", path.display())))
+    let mut png = Vec::new();
+    let cannot = |e: &dyn std::fmt::Display| {
+        std::io::Error::other(format!("cannot write {}: {e}", path.display()))
+    };
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(
+            &px,
+            image.width,
+            image.height,
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| cannot(&e))?;
+    globus_tiling::files::write_atomic(path, &png).map_err(|e| cannot(&e))
 }
 
 /// Pixels whose centre ray hits `body`, and how many of those show no terrain (alpha below

@@ -67,7 +67,7 @@ pub mod memory;
 pub mod overlay;
 mod query;
 
-pub use builder::{DEFAULT_REQUEST_LOOKAHEAD_FRAMES, DEFAULT_SEED, GlobeBuilder};
+pub use builder::{DEFAULT_REQUEST_LOOKAHEAD_FRAMES, DEFAULT_SEED, GlobeBuilder, MIN_SSE_PX};
 pub use camera_spec::CameraSpec;
 pub use controller::{CameraController, Ground};
 pub use error::EngineError;

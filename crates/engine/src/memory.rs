@@ -139,18 +139,35 @@ impl MemoryPlan {
     }
 }
 
-/// Resident memory of this process, bytes (Linux; `None` elsewhere).
-pub fn resident_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb = status
+/// A `kB` figure from a `/proc` file, bytes.
+fn proc_kb(file: &str, key: &str) -> Option<u64> {
+    let text = std::fs::read_to_string(file).ok()?;
+    let kb = text
         .lines()
-        .find(|l| l.starts_with("VmRSS:"))?
+        .find(|l| l.starts_with(key))?
         .split_whitespace()
         .nth(1)?
         .parse::<u64>()
         .ok()?;
     Some(kb << 10)
 }
+
+/// Resident memory of this process, bytes (Linux; `None` elsewhere).
+pub fn resident_bytes() -> Option<u64> {
+    proc_kb("/proc/self/status", "VmRSS:")
+}
+
+/// The machine's memory, bytes (Linux; `None` elsewhere): the largest budget that makes sense.
+pub fn physical_bytes() -> Option<u64> {
+    proc_kb("/proc/meminfo", "MemTotal:")
+}
+
+/// The most GPU tile slots a globe may ask for (about 8 GiB of pools at the default tile size;
+/// a billion slots took 4.9 GB of bookkeeping before any GPU memory).
+pub const MAX_GPU_TILES: u32 = 65_536;
+
+/// The most tile loader threads.
+pub const MAX_WORKERS: usize = 256;
 
 #[cfg(test)]
 mod tests {

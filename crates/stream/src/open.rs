@@ -22,7 +22,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use globus_terrain::encoding::ElevationEncoding;
-use globus_tiling::{GeoRect, TilingScheme};
+use globus_tiling::{GeoRect, TilingScheme, files};
 use serde::Deserialize;
 
 use crate::decode::{
@@ -344,7 +344,7 @@ pub fn open_layer(
     } else {
         let root = Path::new(url);
         let meta_path = root.join("metadata.json");
-        let text = std::fs::read_to_string(&meta_path).map_err(|e| {
+        let text = files::read_text_capped(&meta_path, files::MAX_TEXT_BYTES).map_err(|e| {
             OpenError::Unreadable(format!(
                 "{}: {e} (a tile directory needs the metadata.json `globus tile` writes)",
                 meta_path.display()
@@ -467,7 +467,7 @@ fn served_metadata(
             )));
         }
         (Err(e @ FetchError::Transient { .. }), Some(path)) => {
-            std::fs::read(path).map_err(|_| {
+            files::read_capped(path, files::MAX_TEXT_BYTES).map_err(|_| {
                 OpenError::Unreadable(format!("{url}: {e} (and no copy in the disk cache)"))
             })?
         }

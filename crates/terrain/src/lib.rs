@@ -24,6 +24,11 @@ pub mod quantized_mesh;
 pub mod refine;
 mod tile;
 
+/// The largest height above or below the ellipsoid any input may claim, metres. Earth spans
+/// -11 km to +9 km and Mars -8 km to +22 km; anything beyond 100 km is a void marker, a unit
+/// mistake or a crafted file, and is refused where it is read.
+pub const MAX_ABS_HEIGHT_M: f64 = 100_000.0;
+
 pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
 pub use planet::{Fields, ProceduralPlanet, Relief};
 pub use tile::{ColourImage, TerrainTile};

@@ -9,6 +9,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use globus_tiling::files::MAX_TILE_BYTES;
 use globus_tiling::{GeoRect, TileKey, TilingScheme};
 use rustc_hash::FxHashMap;
 use serde_json::json;
@@ -28,6 +29,21 @@ pub struct ShardSpec {
     pub index: u32,
     /// Number of shards.
     pub count: u32,
+}
+
+/// The most shards a job splits into (a Kubernetes Indexed Job or Slurm array of 10,000 is
+/// already far more than a pyramid's levels can share out evenly; a plan of 4e9 shards took
+/// 96 GB before this limit).
+pub const MAX_SHARDS: u32 = 10_000;
+
+/// Refuses a shard count above [`MAX_SHARDS`] or of 0.
+pub fn check_shard_count(option: &str, n: u32) -> Result<()> {
+    if n == 0 || n > MAX_SHARDS {
+        return Err(TilerError::BadOptions(format!(
+            "{option} {n}: give 1 to {MAX_SHARDS} shards"
+        )));
+    }
+    Ok(())
 }
 
 impl ShardSpec {
@@ -63,7 +79,8 @@ impl ShardSpec {
                 (index, count)
             }
         };
-        if count == 0 || index >= count {
+        check_shard_count("--shard", count)?;
+        if index >= count {
             return Err(bad("the index must be below the number of shards"));
         }
         Ok(Self { index, count })
@@ -304,7 +321,7 @@ pub fn write_handover(
 /// Reads a shard's side file: its header and its hand-over tiles (raw samples).
 pub fn read_handover(output: &Path) -> Result<(HandoverHeader, RawTiles)> {
     let path = handover_path(output);
-    let file = std::fs::File::open(&path).map_err(|e| {
+    let file = globus_tiling::files::open_regular(&path).map_err(|e| {
         TilerError::bad_input(
             output,
             format!("is not a finished shard output ({}: {e})", path.display()),
@@ -338,12 +355,26 @@ pub fn read_handover(output: &Path) -> Result<(HandoverHeader, RawTiles)> {
         let key = TileKey::from_bits(u64::from_le_bytes(k)).ok_or_else(truncated)?;
         let mut l = [0u8; 4];
         r.read_exact(&mut l).map_err(|_| truncated())?;
-        let mut packed = vec![0u8; u32::from_le_bytes(l) as usize];
+        let len = u64::from(u32::from_le_bytes(l));
+        let too_big = || {
+            TilerError::bad_input(
+                &path,
+                format!("tile {key:?} is over {MAX_TILE_BYTES} bytes"),
+            )
+        };
+        if len > MAX_TILE_BYTES {
+            return Err(too_big());
+        }
+        let mut packed = vec![0u8; len as usize];
         r.read_exact(&mut packed).map_err(|_| truncated())?;
         let mut raw = Vec::new();
         flate2::read::DeflateDecoder::new(&packed[..])
+            .take(MAX_TILE_BYTES + 1)
             .read_to_end(&mut raw)
             .map_err(|_| truncated())?;
+        if raw.len() as u64 > MAX_TILE_BYTES {
+            return Err(too_big());
+        }
         tiles.push((key, raw));
     }
     Ok((header, tiles))
@@ -420,7 +451,8 @@ fn read_tiles(
                 let Some(y) = y_name.split('.').next().and_then(|y| y.parse::<u32>().ok()) else {
                     continue;
                 };
-                let data = std::fs::read(&file).map_err(|e| TilerError::io(&file, e))?;
+                let data = globus_tiling::files::read_capped(&file, MAX_TILE_BYTES)
+                    .map_err(|e| TilerError::io(&file, e))?;
                 each(key_of(z, x, y, tms)?, data)?;
             }
         }
@@ -470,6 +502,7 @@ pub fn merge(job: &MergeJob) -> Result<Summary> {
 /// [`merge`], calling `on_progress` with the levels it builds as it goes.
 pub fn merge_with_progress(job: &MergeJob, on_progress: &ProgressFn<'_>) -> Result<Summary> {
     let start = Instant::now();
+    let _lock = crate::sink::OutputLock::take(&job.output)?;
     let mut headers: Vec<HandoverHeader> = Vec::new();
     let mut handed: Vec<(TileKey, Vec<u8>)> = Vec::new();
     for input in &job.inputs {
@@ -633,6 +666,12 @@ mod tests {
         assert!(ShardSpec::parse("8/8", env(&[])).is_err());
         assert!(ShardSpec::parse("8", env(&[])).is_err());
         assert!(ShardSpec::parse("x/2", env(&[])).is_err());
+        // 4e9 shards took 96 GB to plan: refused at once.
+        let e = ShardSpec::parse("0/4000000000", env(&[]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("4000000000") && e.contains("10000"), "{e}");
+        assert!(ShardSpec::parse("0/10000", env(&[])).is_ok());
     }
 
     #[test]

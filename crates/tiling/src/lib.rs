@@ -7,9 +7,12 @@
 //! * [`select`]: level-of-detail selection as a pure function of a [`globus_geo::View`] and a
 //!   [`TileOracle`] that knows each tile's bounds, geometric error and load state.
 //!
+//! * [`files`]: outside files read safely (regular files only, never more than a cap).
+//!
 //! Angles are radians inside the crate; degrees appear only in naming helpers that say so.
 
 mod bounds;
+pub mod files;
 mod key;
 pub mod pmtiles;
 mod rect;

@@ -55,8 +55,9 @@ pub fn run(
     path_file: &Path,
     (width, height): (u32, u32),
 ) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(path_file)
-        .with_context(|| format!("cannot read {}", path_file.display()))?;
+    let text =
+        globus_tiling::files::read_text_capped(path_file, globus_tiling::files::MAX_TEXT_BYTES)
+            .with_context(|| format!("cannot read {}", path_file.display()))?;
     let mut off = Headless::new(builder, width, height)?;
     let fov = a.globe.fov_deg;
     let origin = path_file.display().to_string();

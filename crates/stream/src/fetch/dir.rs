@@ -11,8 +11,7 @@ use globus_tiling::{TileKey, TilingScheme};
 
 use super::{Cancel, Fetch, FetchError, Fetched, OpenError, UrlTemplate};
 
-/// Largest tile file read, bytes (a tile is a few hundred KiB at most).
-pub const MAX_TILE_FILE_BYTES: u64 = 64 << 20;
+use globus_tiling::files::MAX_TILE_BYTES;
 
 /// Reads tiles from a directory.
 pub struct DirectoryFetch {
@@ -76,19 +75,14 @@ impl Fetch for DirectoryFetch {
                 self.root.display()
             )));
         }
-        let len = std::fs::metadata(&real)
-            .map_err(|e| FetchError::transient(format!("{}: {e}", path.display())))?
-            .len();
-        if len > MAX_TILE_FILE_BYTES {
-            return Err(FetchError::Permanent(format!(
-                "{}: {len} bytes is more than a tile ({MAX_TILE_FILE_BYTES} at most)",
-                path.display()
-            )));
-        }
-        match std::fs::read(&real) {
+        match globus_tiling::files::read_capped(&real, MAX_TILE_BYTES) {
             Ok(b) if b.is_empty() => Ok(None),
             Ok(b) => Ok(Some(Fetched::local(b))),
             Err(e) if e.kind() == ErrorKind::NotFound => Ok(None),
+            // Too big, or a FIFO or device: reading again will not help.
+            Err(e) if matches!(e.kind(), ErrorKind::InvalidData | ErrorKind::InvalidInput) => {
+                Err(FetchError::Permanent(format!("{}: {e}", path.display())))
+            }
             Err(e) => Err(FetchError::transient(format!("{}: {e}", path.display()))),
         }
     }
@@ -134,5 +128,31 @@ mod tests {
             b"tms"
         );
         std::fs::remove_dir_all(&base).unwrap();
+    }
+
+    /// A FIFO in a tile directory blocked a loader thread for ever (and the process never
+    /// exited); a sparse 6 GB file was read whole. Both fail at once, for good.
+    #[test]
+    fn fifos_and_oversized_files_fail_at_once() {
+        let root = std::env::temp_dir().join(format!("globus-dirfifo-{}", std::process::id()));
+        std::fs::create_dir_all(root.join("2/1")).unwrap();
+        let fifo = root.join("2/1/1.png");
+        let _ = std::fs::remove_file(&fifo);
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()));
+        let big = std::fs::File::create(root.join("2/1/0.png")).unwrap();
+        big.set_len(6 << 30).unwrap();
+        let f = DirectoryFetch::new(&root, "{z}/{x}/{y}.png", TilingScheme::Geographic).unwrap();
+        let c = Cancel::new();
+        for (y, needle) in [(1, "not a regular file"), (0, "limit")] {
+            match f.fetch(TileKey::new(2, 1, y), &c) {
+                Err(FetchError::Permanent(m)) => assert!(m.contains(needle), "{m}"),
+                other => panic!(
+                    "tile 2/1/{y}: {:?}",
+                    other.map(|o| o.map(|f| f.bytes.len()))
+                ),
+            }
+        }
+        std::fs::remove_dir_all(&root).unwrap();
     }
 }

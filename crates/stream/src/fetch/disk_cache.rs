@@ -143,7 +143,11 @@ impl CachedFetch {
 
     /// The cached entry: (fresh until, bytes or `None` for "no data").
     fn read(&self, key: TileKey) -> Option<(u64, Option<Vec<u8>>)> {
-        let bytes = std::fs::read(self.path(key)).ok()?;
+        let bytes = globus_tiling::files::read_capped(
+            &self.path(key),
+            globus_tiling::files::MAX_TILE_BYTES + HEADER as u64,
+        )
+        .ok()?;
         if bytes.len() < HEADER || &bytes[..8] != MAGIC {
             return None;
         }

@@ -248,6 +248,13 @@ impl HttpClient {
             }
             match reader.read(&mut chunk) {
                 Ok(0) => break,
+                // The limit holds for the decoded body: a 2 GiB gzip bomb is a few MiB on the
+                // wire.
+                Ok(n) if (bytes.len() + n) as u64 > limit => {
+                    return Err(FetchError::Permanent(format!(
+                        "{url}: body decodes to more than the {limit}-byte limit"
+                    )));
+                }
                 Ok(n) => bytes.extend_from_slice(&chunk[..n]),
                 Err(e) => return Err(classify_io(url, &e)),
             }
@@ -452,6 +459,58 @@ mod tests {
             let e = o.check().expect_err(needle).to_string();
             assert!(e.contains(needle), "{e}");
         }
+    }
+
+    /// A gzip bomb (a few KiB on the wire, far more decoded) got past the body limit, which
+    /// counted wire bytes: the decoded body is what is limited now.
+    #[test]
+    fn the_body_limit_holds_for_the_decoded_gzip_body() {
+        use std::io::{BufRead, Write};
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+        gz.write_all(&vec![0u8; 8 << 20]).unwrap();
+        let bomb = gz.finish().unwrap();
+        assert!(bomb.len() < 64 << 10);
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            for stream in listener.incoming().take(2) {
+                let Ok(mut s) = stream else { return };
+                let mut r = std::io::BufReader::new(s.try_clone().unwrap());
+                let mut line = String::new();
+                while r.read_line(&mut line).is_ok_and(|n| n > 2) {
+                    line.clear();
+                }
+                let head = format!(
+                    "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Encoding: gzip\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    bomb.len()
+                );
+                let _ = s.write_all(head.as_bytes());
+                let _ = s.write_all(&bomb);
+            }
+        });
+        let client = HttpClient::new(HttpOptions {
+            max_body_bytes: 1 << 20,
+            ..HttpOptions::default()
+        });
+        let url = format!("http://{addr}/0/0/0.png");
+        let e = match client.get(&url, None, &Cancel::new()) {
+            Ok(b) => panic!(
+                "a body of {} bytes got past the limit",
+                b.map_or(0, |b| b.fetched.bytes.len())
+            ),
+            Err(e) => e,
+        };
+        assert!(
+            matches!(&e, FetchError::Permanent(m) if m.contains("decodes to more")),
+            "{e}"
+        );
+        // Within the limit, the same bomb decodes.
+        let roomy = HttpClient::new(HttpOptions {
+            max_body_bytes: 16 << 20,
+            ..HttpOptions::default()
+        });
+        let body = roomy.get(&url, None, &Cancel::new()).unwrap().unwrap();
+        assert_eq!(body.fetched.bytes.len(), 8 << 20);
     }
 
     #[test]

@@ -52,7 +52,7 @@ impl FileRange {
     pub fn open(path: &Path) -> Result<Self, OpenError> {
         let unreadable =
             |e: std::io::Error| OpenError::Unreadable(format!("PMTiles {}: {e}", path.display()));
-        let file = File::open(path).map_err(unreadable)?;
+        let file = globus_tiling::files::open_regular(path).map_err(unreadable)?;
         let len = file.metadata().map_err(unreadable)?.len();
         Ok(Self {
             file,
@@ -155,7 +155,7 @@ impl<R: RangeRead> KeptHead<R> {
             "{:016x}.pmtiles-head",
             super::disk_cache::origin_hash(inner.name())
         ));
-        let kept = std::fs::read(&path)
+        let kept = globus_tiling::files::read_capped(&path, 4 * MAX_PART_BYTES)
             .ok()
             .and_then(|b| parse_parts(&b))
             .unwrap_or_default();

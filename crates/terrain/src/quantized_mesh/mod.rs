@@ -56,6 +56,45 @@ pub struct Header {
     pub horizon_occlusion_point: DVec3,
 }
 
+impl Header {
+    /// Refuses what no tile can hold: non-finite values, heights beyond
+    /// [`crate::MAX_ABS_HEIGHT_M`], a minimum above the maximum, a negative radius, a centre
+    /// or sphere farther than a planet's size (a bounding volume of 1e30 m culls nothing and
+    /// refines for ever).
+    pub fn check(&self) -> Result<(), DecodeError> {
+        let bad = |what: String| Err(DecodeError::BadHeader(what));
+        let (lo, hi) = (f64::from(self.min_height_m), f64::from(self.max_height_m));
+        if !(lo.abs() <= crate::MAX_ABS_HEIGHT_M && hi.abs() <= crate::MAX_ABS_HEIGHT_M) {
+            return bad(format!(
+                "heights {lo} .. {hi} m are not numbers within +-{} m",
+                crate::MAX_ABS_HEIGHT_M
+            ));
+        }
+        if lo > hi {
+            return bad(format!("minimum height {lo} m is above the maximum {hi} m"));
+        }
+        // Farther than any body Globus draws (Jupiter's radius is 7.1e7 m).
+        const FAR_M: f64 = 1e9;
+        let near = |p: DVec3| p.is_finite() && p.length() <= FAR_M;
+        if !near(self.centre) || !near(self.sphere_centre) {
+            return bad(format!(
+                "centre {:?} or bounding sphere centre {:?} is not a point near a planet",
+                self.centre, self.sphere_centre
+            ));
+        }
+        if !(self.sphere_radius_m >= 0.0 && self.sphere_radius_m <= FAR_M) {
+            return bad(format!("bounding sphere radius {} m", self.sphere_radius_m));
+        }
+        if !self.horizon_occlusion_point.is_finite() {
+            return bad(format!(
+                "horizon occlusion point {:?}",
+                self.horizon_occlusion_point
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The water mask extension.
 #[derive(Clone, Debug, PartialEq)]
 pub enum WaterMask {
@@ -142,6 +181,18 @@ pub enum DecodeError {
         id: u8,
         /// What is wrong.
         why: String,
+    },
+    /// The header holds values no tile can have (NaN, heights beyond
+    /// [`crate::MAX_ABS_HEIGHT_M`], a minimum above the maximum).
+    #[error("quantized-mesh header: {0}")]
+    BadHeader(String),
+    /// The tile has no triangles (or fewer than three vertices).
+    #[error("quantized-mesh tile is empty: {vertices} vertices, {triangles} triangles")]
+    Empty {
+        /// Vertex count.
+        vertices: usize,
+        /// Triangle count.
+        triangles: usize,
     },
     /// gzip data is corrupt or inflates beyond [`MAX_INFLATED_BYTES`].
     #[error("quantized-mesh gzip data: {0}")]
@@ -281,6 +332,7 @@ impl QuantizedMesh {
             sphere_radius_m: r.f64("header")?,
             horizon_occlusion_point: r.dvec3("header")?,
         };
+        header.check()?;
         let n = r.count("vertex", 6)?;
         let mut coords = [Vec::new(), Vec::new(), Vec::new()];
         for (values, what) in coords.iter_mut().zip(["u", "v", "height"]) {
@@ -347,6 +399,12 @@ impl QuantizedMesh {
             }
         }
         let [west, south, east, north] = edges;
+        if n < 3 || triangles == 0 {
+            return Err(DecodeError::Empty {
+                vertices: n,
+                triangles,
+            });
+        }
         let mut mesh = Self {
             header,
             u,

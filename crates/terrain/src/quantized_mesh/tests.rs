@@ -149,6 +149,52 @@ fn huge_counts_are_refused_before_allocating() {
     ));
 }
 
+/// NaN heights panicked inside refinement, min = 1e30 > max = -1e30 loaded 12,540 tiles into
+/// 8.7 GB, and a 112-byte all-zero file was accepted: each header is refused with its reason.
+#[test]
+fn nonsense_headers_and_empty_tiles_are_refused() {
+    let (_, _, qm) = sample_tile(33, 5.0);
+    let with = |f: &dyn Fn(&mut Header)| {
+        let mut q = qm.clone();
+        f(&mut q.header);
+        QuantizedMesh::decode(&q.encode(false))
+    };
+    assert!(with(&|_| {}).is_ok());
+    for (what, f) in [
+        (
+            "NaN minimum",
+            &(|h: &mut Header| h.min_height_m = f32::NAN) as &dyn Fn(&mut Header),
+        ),
+        ("infinite maximum", &|h: &mut Header| {
+            h.max_height_m = f32::INFINITY
+        }),
+        ("1e30 over -1e30", &|h: &mut Header| {
+            h.min_height_m = 1e30;
+            h.max_height_m = -1e30;
+        }),
+        ("min above max", &|h: &mut Header| {
+            h.min_height_m = 500.0;
+            h.max_height_m = 400.0;
+        }),
+        ("NaN radius", &|h: &mut Header| h.sphere_radius_m = f64::NAN),
+        ("far centre", &|h: &mut Header| {
+            h.centre = DVec3::splat(1e30)
+        }),
+    ] {
+        match with(f) {
+            Err(DecodeError::BadHeader(why)) => assert!(!why.is_empty(), "{what}"),
+            other => panic!("{what}: {other:?}"),
+        }
+    }
+    assert_eq!(
+        QuantizedMesh::decode(&[0u8; 112]),
+        Err(DecodeError::Empty {
+            vertices: 0,
+            triangles: 0
+        })
+    );
+}
+
 #[test]
 fn out_of_range_indices_are_refused() {
     let (_, _, mut qm) = sample_tile(17, 0.0);

@@ -31,27 +31,39 @@ pub enum GeoTiff {
 /// Decoded chunks a streamed GeoTIFF keeps in memory by default, in bytes.
 pub const CHUNK_CACHE_BYTES: usize = 512 << 20;
 
+/// The most pixels a side a GeoTIFF may declare (a whole Earth at 1 m is 4e7).
+pub const MAX_SIDE: usize = 1 << 26;
+
+/// The largest strip or tile, decoded, in bytes: 64 MiB (GDAL writes 256 x 256 tiles, or strips
+/// of a few rows; a 16384 x 1024 strip of f32 fits).
+pub const MAX_CHUNK_BYTES: usize = 256 << 20;
+
+/// The most pixels of an elevation raster with voids, read whole for filling (4 GiB of f32).
+pub const MAX_WHOLE_SAMPLES: usize = 1 << 30;
+
+/// The largest height a sample may hold, in metres (anything larger is a void marker or a unit
+/// mistake, and would be clipped by every tile encoding).
+pub use globus_terrain::MAX_ABS_HEIGHT_M;
+
+/// Converts one row of raw samples; returns the first sample that is no height, if any.
+type Convert<T> = fn(&ChunkLayout, &[u8], &mut [T]) -> Option<(usize, f64)>;
+
 /// A GeoTIFF read a chunk (strip or tile) at a time, decoded chunks kept in an LRU cache.
 struct ChunkedSource<T> {
     path: std::path::PathBuf,
     file: std::fs::File,
     layout: ChunkLayout,
     georef: Georef,
-    convert: fn(&ChunkLayout, &[u8], &mut [T]),
+    convert: Convert<T>,
     cache: std::sync::Mutex<Lru<usize, Vec<T>>>,
 }
 
 impl<T: Copy + Default + Send + Sync> ChunkedSource<T> {
-    fn new(
-        path: &Path,
-        layout: ChunkLayout,
-        georef: Georef,
-        convert: fn(&ChunkLayout, &[u8], &mut [T]),
-    ) -> Result<Self> {
+    fn new(path: &Path, layout: ChunkLayout, georef: Georef, convert: Convert<T>) -> Result<Self> {
         let chunk_bytes = layout.chunk_w * layout.chunk_h * std::mem::size_of::<T>();
         Ok(Self {
             path: path.to_owned(),
-            file: std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?,
+            file: crate::input::open_regular(path)?,
             cache: std::sync::Mutex::new(Lru::new(CHUNK_CACHE_BYTES / chunk_bytes.max(1))),
             layout,
             georef,
@@ -73,11 +85,14 @@ impl<T: Copy + Default + Send + Sync> ChunkedSource<T> {
         let row_bytes = l.chunk_w * l.channels * l.bits / 8;
         let mut out = vec![T::default(); l.chunk_w * dh];
         for r in 0..dh {
-            (self.convert)(
+            if let Some((c, v)) = (self.convert)(
                 l,
                 &raw[r * row_bytes..(r + 1) * row_bytes],
                 &mut out[r * l.chunk_w..(r + 1) * l.chunk_w],
-            );
+            ) {
+                let (x0, y0, _, _) = l.placement(i);
+                return Err(implausible_height(&self.path, v, x0 + c, y0 + r));
+            }
         }
         let out = std::sync::Arc::new(out);
         self.cache
@@ -119,14 +134,61 @@ impl<T: Copy + Default + Send + Sync> RowSource<T> for ChunkedSource<T> {
     }
 }
 
-fn heights_of(l: &ChunkLayout, raw: &[u8], out: &mut [f32]) {
+/// Heights of one row; the index of the first value that is no height in metres (beyond
+/// [`MAX_ABS_HEIGHT_M`], infinite or NaN in a raster without nodata), if any.
+fn heights_of(l: &ChunkLayout, raw: &[u8], out: &mut [f32]) -> Option<(usize, f64)> {
     let b = l.bits / 8;
-    for (o, v) in out.iter_mut().zip(raw.chunks_exact(b)) {
-        *o = l.value(v) as f32;
+    let mut bad = None;
+    for (i, (o, v)) in out.iter_mut().zip(raw.chunks_exact(b)).enumerate() {
+        let v = l.value(v);
+        if bad.is_none() && (v.is_nan() || v.abs() > MAX_ABS_HEIGHT_M) {
+            bad = Some((i, v));
+        }
+        *o = v as f32;
     }
+    bad
 }
 
-fn rgba_of(l: &ChunkLayout, raw: &[u8], out: &mut [[u8; 4]]) {
+fn implausible_height(path: &Path, v: f64, x: usize, y: usize) -> TilerError {
+    TilerError::bad_input(
+        path,
+        format!(
+            "pixel ({x}, {y}) holds {v}, which is no height in metres (|h| <= {MAX_ABS_HEIGHT_M}); mark voids with GDAL_NODATA"
+        ),
+    )
+}
+
+/// Refuses georeferencing whose raster reaches outside its CRS (a pixel scale of 1e10 degrees).
+fn check_extent(
+    path: &Path,
+    crs: Crs,
+    (ox, oy): (f64, f64),
+    (sx, sy): (f64, f64),
+    (width, height): (usize, usize),
+) -> Result<()> {
+    let (x1, y1) = (ox + sx * width as f64, oy - sy * height as f64);
+    // A pixel of slack: rasters often overhang the edges by half a pixel.
+    let (lim_x, lim_y, unit) = match crs {
+        Crs::Geographic => (540.0, 90.0, "degrees"),
+        Crs::WebMercator => (2.0 * 20_037_508.342_789_244, 20_037_508.342_789_244, "m"),
+    };
+    let inside = |v: f64, lim: f64, step: f64| v.abs() <= lim + step;
+    if !(inside(ox, lim_x, sx)
+        && inside(x1, lim_x, sx)
+        && inside(oy, lim_y, sy)
+        && inside(y1, lim_y, sy))
+    {
+        return Err(TilerError::bad_input(
+            path,
+            format!(
+                "covers x {ox}..{x1}, y {y1}..{oy} {unit}, outside its CRS (wrong pixel scale or tiepoint?)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn rgba_of(l: &ChunkLayout, raw: &[u8], out: &mut [[u8; 4]]) -> Option<(usize, f64)> {
     match l.channels {
         1 => out
             .iter_mut()
@@ -141,6 +203,7 @@ fn rgba_of(l: &ChunkLayout, raw: &[u8], out: &mut [[u8; 4]]) {
             .zip(raw.chunks_exact(l.channels))
             .for_each(|(o, p)| *o = [p[0], p[1], p[2], p[3]]),
     }
+    None
 }
 
 // GeoKey IDs (GeoTIFF 1.1, section 7).
@@ -197,17 +260,29 @@ fn crs_of(path: &Path, keys: &[(u16, u16)]) -> Result<Crs> {
 
 /// Reads a GeoTIFF into memory.
 pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
-    let file = std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?;
+    let file = crate::input::open_regular(path)?;
+    let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     let bad = |e: tiff::TiffError| TilerError::bad_input(path, format!("TIFF: {e}"));
+    // No tag can hold more values than the file has bytes; chunks are read by hand below.
+    let mut limits = Limits::unlimited();
+    limits.ifd_value_size = usize::try_from(file_len).unwrap_or(usize::MAX);
     let mut dec = Decoder::new(BufReader::new(file))
         .map_err(bad)?
-        .with_limits(Limits::unlimited());
+        .with_limits(limits);
     let (width, height) = dec.dimensions().map_err(bad)?;
     let (width, height) = (width as usize, height as usize);
     if width < 2 || height < 2 {
         return Err(TilerError::bad_input(
             path,
             format!("is only {width}x{height} pixels"),
+        ));
+    }
+    if width > MAX_SIDE || height > MAX_SIDE {
+        return Err(TilerError::bad_input(
+            path,
+            format!(
+                "declares {width}x{height} pixels; at most {MAX_SIDE} a side are supported (split it with gdal_translate -srcwin)"
+            ),
         ));
     }
     let key_dir = dec
@@ -271,7 +346,7 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
             scale[1],
         )
     };
-    if !(sx > 0.0 && sy > 0.0 && ox.is_finite() && oy.is_finite()) {
+    if !(sx > 0.0 && sy > 0.0 && sx.is_finite() && sy.is_finite()) {
         return Err(TilerError::bad_input(
             path,
             format!(
@@ -279,6 +354,13 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
             ),
         ));
     }
+    if !(ox.is_finite() && oy.is_finite()) {
+        return Err(TilerError::bad_input(
+            path,
+            format!("has an unusable origin ({ox}, {oy}) in its tiepoint or transformation"),
+        ));
+    }
+    check_extent(path, crs, (ox, oy), (sx, sy), (width, height))?;
     // Sample centres: half a pixel in for pixel-is-area rasters.
     let half = match registration {
         Registration::Area => 0.5,
@@ -292,11 +374,24 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
         dy: sy,
         registration,
     };
-    let nodata: Option<f64> = dec
-        .find_tag(Tag::GdalNodata)
-        .map_err(bad)?
-        .and_then(|v| v.into_string().ok())
-        .and_then(|s| s.trim_matches(char::from(0)).trim().parse().ok());
+    let nodata = match dec.find_tag(Tag::GdalNodata).map_err(bad)? {
+        None => None,
+        Some(v) => {
+            let text = v.into_string().map_err(bad)?;
+            let text = text.trim_matches(char::from(0)).trim();
+            match text.parse::<f64>() {
+                Ok(v) => Some(v),
+                // GDAL writes "nan" for float rasters whose voids are NaN: voids already.
+                Err(_) if text.eq_ignore_ascii_case("nan") => None,
+                Err(_) => {
+                    return Err(TilerError::bad_input(
+                        path,
+                        format!("has GDAL_NODATA {text:?}, which is not a number"),
+                    ));
+                }
+            }
+        }
+    };
     if dec
         .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
         .map_err(bad)?
@@ -307,14 +402,7 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
             "stores its bands in separate planes; rewrite it with gdal_translate -co INTERLEAVE=PIXEL",
         ));
     }
-    let to_height = |v: f64| -> f32 {
-        if Some(v) == nodata || !v.is_finite() {
-            f32::NAN
-        } else {
-            v as f32
-        }
-    };
-    let layout = ChunkLayout::read(path, &mut dec, width, height)?;
+    let layout = ChunkLayout::read(path, &mut dec, width, height, file_len)?;
     let c = layout.channels;
     match (layout.format, layout.bits, c) {
         (SampleFormat::Uint, 8, 1 | 3 | 4) => {
@@ -340,7 +428,15 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
         ));
     }
     // Elevation with a nodata value: read whole, voids become NaN for filling.
-    let file = std::fs::File::open(path).map_err(|e| TilerError::io(path, e))?;
+    if width * height > MAX_WHOLE_SAMPLES {
+        return Err(TilerError::bad_input(
+            path,
+            format!(
+                "has a nodata value and {width}x{height} pixels; rasters with voids are read whole for filling, up to {MAX_WHOLE_SAMPLES} pixels (split it with gdal_translate -srcwin, or fill its voids first)"
+            ),
+        ));
+    }
+    let file = crate::input::open_regular(path)?;
     let mut heights = vec![0.0f32; width * height];
     let mut raw = Vec::new();
     let mut line = Vec::new();
@@ -348,12 +444,21 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
         layout.read_chunk(path, &file, i, &mut raw)?;
         let (x0, y0, dw, dh) = layout.placement(i);
         let row_bytes = layout.chunk_w * layout.bits / 8;
-        line.resize(layout.chunk_w, 0.0f32);
+        line.resize(layout.chunk_w, 0.0f64);
         for r in 0..dh {
-            heights_of(&layout, &raw[r * row_bytes..(r + 1) * row_bytes], &mut line);
+            let src = &raw[r * row_bytes..(r + 1) * row_bytes];
+            for (o, v) in line.iter_mut().zip(src.chunks_exact(layout.bits / 8)) {
+                *o = layout.value(v);
+            }
             let dst = &mut heights[(y0 + r) * width + x0..][..dw];
-            for (d, &v) in dst.iter_mut().zip(&line) {
-                *d = to_height(f64::from(v));
+            for (c, (d, &v)) in dst.iter_mut().zip(&line).enumerate() {
+                *d = if Some(v) == nodata || v.is_nan() {
+                    f32::NAN
+                } else if v.abs() <= MAX_ABS_HEIGHT_M {
+                    v as f32
+                } else {
+                    return Err(implausible_height(path, v, x0 + c, y0 + r));
+                };
             }
         }
     }
@@ -404,6 +509,7 @@ impl ChunkLayout {
         dec: &mut Decoder<R>,
         width: usize,
         height: usize,
+        file_len: u64,
     ) -> Result<Self> {
         let unsupported = |what: String| TilerError::bad_input(path, what);
         let tag = |dec: &mut Decoder<R>, t: Tag| {
@@ -476,6 +582,22 @@ impl ChunkLayout {
         if chunk_w == 0 || chunk_h == 0 {
             return Err(unsupported("has an empty tile or strip size".into()));
         }
+        // TIFF tiles are multiples of 16 and may overhang the image, but not by more than a tile.
+        if chunk_w > width.next_multiple_of(16).max(1024)
+            || chunk_h > height.next_multiple_of(16).max(1024)
+        {
+            return Err(unsupported(format!(
+                "declares {chunk_w}x{chunk_h} tiles over a {width}x{height} image"
+            )));
+        }
+        let chunk_bytes = chunk_w * chunk_h * channels * bits / 8;
+        if chunk_bytes > MAX_CHUNK_BYTES {
+            return Err(unsupported(format!(
+                "has {chunk_w}x{chunk_h} strips or tiles of {} MiB each; at most {} MiB are supported (rewrite it with gdal_translate -co TILED=YES)",
+                chunk_bytes >> 20,
+                MAX_CHUNK_BYTES >> 20
+            )));
+        }
         let across = width.div_ceil(chunk_w);
         let expected = across * height.div_ceil(chunk_h);
         if offsets.len() != expected || counts.len() != expected {
@@ -483,6 +605,15 @@ impl ChunkLayout {
                 "lists {} chunks where {expected} are needed (band-separate planes are not supported)",
                 offsets.len()
             )));
+        }
+        // Compressed data can exceed what it holds a little; not by more than an eighth.
+        let max_count = (chunk_bytes + chunk_bytes / 8 + 4096) as u64;
+        for (i, (&o, &n)) in offsets.iter().zip(&counts).enumerate() {
+            if n > max_count || o.checked_add(n).is_none_or(|end| end > file_len) {
+                return Err(unsupported(format!(
+                    "chunk {i} claims {n} bytes at offset {o}, beyond the file's {file_len} bytes or its {chunk_bytes}-byte chunk size (truncated or corrupt)"
+                )));
+            }
         }
         Ok(Self {
             width,
@@ -664,6 +795,207 @@ impl ChunkLayout {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A little-endian classic TIFF written tag by tag, for crafting what GDAL never writes.
+    struct Crafted {
+        entries: Vec<(u16, u16, u32, Vec<u8>)>,
+        pixels: Vec<u8>,
+    }
+
+    const SHORT: u16 = 3;
+    const LONG: u16 = 4;
+    const DOUBLE: u16 = 12;
+    const ASCII: u16 = 2;
+
+    impl Crafted {
+        /// `width` x `height` single-band 16-bit signed elevation in EPSG:4326, one strip
+        /// holding `pixels`, 0.01 degree pixels from (7, 47).
+        fn elevation(width: u32, height: u32, pixels: Vec<u8>) -> Self {
+            let mut c = Self {
+                entries: Vec::new(),
+                pixels,
+            };
+            c.long(256, &[width]);
+            c.long(257, &[height]);
+            c.short(258, &[16]);
+            c.short(259, &[1]);
+            c.short(262, &[1]);
+            c.short(277, &[1]);
+            c.long(278, &[height]);
+            c.short(339, &[2]);
+            c.double(33550, &[0.01, 0.01, 0.0]);
+            c.double(33922, &[0.0, 0.0, 0.0, 7.0, 47.0, 0.0]);
+            c.short(34735, &[1, 1, 0, 2, 1024, 0, 1, 2, 2048, 0, 1, 4326]);
+            c
+        }
+
+        fn set(&mut self, tag: u16, typ: u16, count: u32, bytes: Vec<u8>) {
+            self.entries.retain(|e| e.0 != tag);
+            self.entries.push((tag, typ, count, bytes));
+        }
+
+        fn short(&mut self, tag: u16, v: &[u16]) {
+            let b = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.set(tag, SHORT, v.len() as u32, b);
+        }
+
+        fn long(&mut self, tag: u16, v: &[u32]) {
+            let b = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.set(tag, LONG, v.len() as u32, b);
+        }
+
+        fn double(&mut self, tag: u16, v: &[f64]) {
+            let b = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+            self.set(tag, DOUBLE, v.len() as u32, b);
+        }
+
+        fn ascii(&mut self, tag: u16, v: &str) {
+            let mut b = v.as_bytes().to_vec();
+            b.push(0);
+            self.set(tag, ASCII, b.len() as u32, b);
+        }
+
+        /// Writes it, the strip or tile offsets pointing at the pixels (unless set already).
+        fn write(mut self, name: &str) -> std::path::PathBuf {
+            let tiled = self.entries.iter().any(|e| e.0 == 322);
+            let (off_tag, count_tag) = if tiled { (324, 325) } else { (273, 279) };
+            let n = self.pixels.len() as u32;
+            if !self.entries.iter().any(|e| e.0 == count_tag) {
+                self.long(count_tag, &[n]);
+            }
+            self.long(off_tag, &[8]);
+            self.entries.sort_by_key(|e| e.0);
+            let mut out = b"II*\0".to_vec();
+            let ifd = 8 + self.pixels.len();
+            out.extend((ifd as u32).to_le_bytes());
+            out.extend(&self.pixels);
+            let mut extra = ifd + 2 + 12 * self.entries.len() + 4;
+            let mut tail: Vec<u8> = Vec::new();
+            out.extend((self.entries.len() as u16).to_le_bytes());
+            for (tag, typ, count, bytes) in &self.entries {
+                out.extend(tag.to_le_bytes());
+                out.extend(typ.to_le_bytes());
+                out.extend(count.to_le_bytes());
+                if bytes.len() <= 4 {
+                    let mut v = bytes.clone();
+                    v.resize(4, 0);
+                    out.extend(v);
+                } else {
+                    out.extend((extra as u32).to_le_bytes());
+                    tail.extend(bytes);
+                    extra += bytes.len();
+                }
+            }
+            out.extend(0u32.to_le_bytes());
+            out.extend(tail);
+            let dir = std::env::temp_dir().join(format!("globus-geotiff-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join(name);
+            std::fs::write(&path, out).unwrap();
+            path
+        }
+    }
+
+    fn heights(v: &[i16]) -> Vec<u8> {
+        v.iter().flat_map(|h| h.to_le_bytes()).collect()
+    }
+
+    fn refused(c: Crafted, name: &str, needle: &str) {
+        let path = c.write(name);
+        let e = match read_geotiff(&path) {
+            Ok(_) => panic!("{name} was accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains(name) && e.contains(needle), "{name}: {e}");
+    }
+
+    /// The crafted writer makes files the reader takes: heights come back where they were.
+    #[test]
+    fn a_crafted_tiff_reads_back() {
+        let path = Crafted::elevation(3, 2, heights(&[1, 2, 3, -4, 5, 8848])).write("ok.tif");
+        let Ok(GeoTiff::ElevationStream(src)) = read_geotiff(&path) else {
+            panic!("not streamed elevation");
+        };
+        let mut row = [0.0f32; 3];
+        src.read_row(1, 0, &mut row).unwrap();
+        assert_eq!(row, [-4.0, 5.0, 8848.0]);
+        assert!((src.georef().x0 - 7.005).abs() < 1e-12);
+    }
+
+    /// Dimensions of 2^31-1 a side or 2^32-1 wide aborted on a 9.2 EB allocation; a tile
+    /// width of 2^31 panicked with "capacity overflow"; one 65536 x 65536 tile over a
+    /// 256 x 256 image took 12.3 GB: each is refused before anything is allocated.
+    #[test]
+    fn giant_dimensions_and_tiles_are_refused_before_allocating() {
+        refused(
+            Crafted::elevation(i32::MAX as u32, i32::MAX as u32, heights(&[0; 4])),
+            "huge.tif",
+            "pixels",
+        );
+        refused(
+            Crafted::elevation(u32::MAX, 2, heights(&[0; 4])),
+            "wide.tif",
+            "pixels",
+        );
+        let mut c = Crafted::elevation(256, 256, heights(&[0; 4]));
+        c.long(322, &[1 << 31]);
+        c.long(323, &[16]);
+        // The tiff crate itself may refuse it first: either way one error naming the file.
+        refused(c, "tilewidth.tif", "");
+        let mut c = Crafted::elevation(256, 256, heights(&[0; 4]));
+        c.long(322, &[65536]);
+        c.long(323, &[65536]);
+        refused(c, "bigtile.tif", "tiles over a 256x256 image");
+        // A chunk claiming more bytes than the file has.
+        let mut c = Crafted::elevation(64, 64, heights(&[0; 4]));
+        c.long(279, &[8192]);
+        refused(c, "short.tif", "beyond the file");
+    }
+
+    /// Georeferencing and sample nonsense: a pixel scale of 1e10 degrees, an infinite
+    /// tiepoint, GDAL_NODATA "abc", heights of 1e38 and infinity (clipped to 32,768 m before).
+    #[test]
+    fn nonsense_georeferencing_and_heights_are_refused() {
+        let mut c = Crafted::elevation(2, 2, heights(&[0; 4]));
+        c.double(33550, &[1e10, 1e10, 0.0]);
+        refused(c, "scale.tif", "outside its CRS");
+        let mut c = Crafted::elevation(2, 2, heights(&[0; 4]));
+        c.double(33922, &[0.0, 0.0, 0.0, f64::INFINITY, 47.0, 0.0]);
+        refused(c, "inf-tie.tif", "unusable origin");
+        let mut c = Crafted::elevation(2, 2, heights(&[0; 4]));
+        c.ascii(42113, "abc");
+        refused(c, "nodata.tif", "\"abc\"");
+        for (name, v) in [("e38.tif", 1e38f32), ("inf.tif", f32::INFINITY)] {
+            let px: Vec<u8> = [0.0, 1.0, v, 2.0]
+                .iter()
+                .flat_map(|h: &f32| h.to_le_bytes())
+                .collect();
+            let mut c = Crafted::elevation(2, 2, px);
+            c.short(258, &[32]);
+            c.short(339, &[3]);
+            let path = c.write(name);
+            let src = match read_geotiff(&path) {
+                Ok(GeoTiff::ElevationStream(s)) => s,
+                _ => panic!("{name}: not read as streamed elevation"),
+            };
+            let mut row = [0.0f32; 2];
+            let e = src.read_row(1, 0, &mut row).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains("no height"), "{e}");
+            // With a nodata value the raster is read whole: refused there too.
+            let mut c = Crafted::elevation(
+                2,
+                2,
+                [0.0f32, 1.0, v, 2.0]
+                    .iter()
+                    .flat_map(|h| h.to_le_bytes())
+                    .collect(),
+            );
+            c.short(258, &[32]);
+            c.short(339, &[3]);
+            c.ascii(42113, "-9999");
+            refused(c, name, "no height");
+        }
+    }
 
     #[test]
     fn geo_keys_are_read_from_the_directory() {

@@ -187,7 +187,8 @@ impl HgtMosaic {
             }
         }
         // Decode outside the lock; two threads may decode the same file once each.
-        let bytes = std::fs::read(path).map_err(|e| TilerError::io(path, e))?;
+        let bytes = globus_tiling::files::read_capped(path, (self.n * self.n * 2) as u64)
+            .map_err(|e| TilerError::io(path, e))?;
         if bytes.len() != self.n * self.n * 2 {
             return Err(TilerError::bad_input(path, "changed size while tiling"));
         }

@@ -10,8 +10,12 @@ use crate::error::{Result, TilerError};
 use crate::raster::{ElevationRaster, Georef, ImageRaster};
 
 fn decode(path: &Path) -> Result<image::DynamicImage> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| TilerError::io(path, e))?
+    let file = crate::input::open_regular(path)?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file));
+    if let Ok(f) = image::ImageFormat::from_path(path) {
+        reader.set_format(f);
+    }
+    let reader = reader
         .with_guessed_format()
         .map_err(|e| TilerError::io(path, e))?;
     if reader.format().is_none() {
@@ -45,9 +49,9 @@ pub fn read_world_image(path: &Path, bounds: GeoRect) -> Result<ImageRaster> {
 /// Reads a greyscale image covering `bounds` as elevation: `height = value * scale_m`
 /// (value 0..255 for 8-bit images, 0..65535 for 16-bit ones).
 pub fn read_grey_elevation(path: &Path, bounds: GeoRect, scale_m: f64) -> Result<ElevationRaster> {
-    if !(scale_m.is_finite() && scale_m > 0.0) {
+    if !(scale_m > 0.0 && scale_m <= 1000.0) {
         return Err(TilerError::BadOptions(format!(
-            "--height-scale must be a positive number of metres per grey level, not {scale_m}"
+            "--height-scale must be a positive number of metres per grey level up to 1000, not {scale_m:e}"
         )));
     }
     let img = decode(path)?;
@@ -65,6 +69,16 @@ pub fn read_grey_elevation(path: &Path, bounds: GeoRect, scale_m: f64) -> Result
             .map(|v| (f64::from(v) * scale_m) as f32)
             .collect(),
     };
+    let top = data.iter().fold(0.0f32, |m, &v| m.max(v));
+    if f64::from(top) > crate::input::geotiff::MAX_ABS_HEIGHT_M {
+        return Err(TilerError::bad_input(
+            path,
+            format!(
+                "its brightest grey level times --height-scale {scale_m} is {top} m, more than any height on a planet ({} m)",
+                crate::input::geotiff::MAX_ABS_HEIGHT_M
+            ),
+        ));
+    }
     Ok(ElevationRaster {
         width,
         height,

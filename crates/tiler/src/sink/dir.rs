@@ -96,7 +96,7 @@ impl TileSink for DirSink {
 
     fn existing(&self, key: TileKey) -> Result<Option<Vec<u8>>> {
         let path = self.tile_path(key);
-        match std::fs::read(&path) {
+        match globus_tiling::files::read_capped(&path, globus_tiling::files::MAX_TILE_BYTES) {
             Ok(b) => Ok(Some(b)),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
             Err(e) => Err(TilerError::output(&path, e)),

@@ -10,7 +10,7 @@ pub use dir::{DirSink, TileLayout};
 pub use mbtiles::MbTilesSink;
 pub use pmtiles::PmTilesSink;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use globus_tiling::{GeoRect, TileKey, TilingScheme};
 
@@ -134,12 +134,15 @@ impl OutputSink {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
-        let exists = out.exists();
+        let exists = out.symlink_metadata().is_ok();
         if exists && !o.force && !o.resume {
             return Err(TilerError::output(
                 out,
                 "already exists; pass --force to replace it or --resume to continue it",
             ));
+        }
+        if exists {
+            check_replaceable(out, &ext)?;
         }
         match ext.as_str() {
             "mbtiles" => Ok(OutputSink::MbTiles(MbTilesSink::create(
@@ -169,13 +172,80 @@ impl OutputSink {
     }
 }
 
+/// An exclusive hold on an output for one run: `OUT.lock` beside it, locked (advisory, by the
+/// operating system, so a killed run lets go). A second `globus tile` writing the same output
+/// is refused at once instead of failing at its end with "disk I/O error".
+pub struct OutputLock {
+    _file: std::fs::File,
+    path: PathBuf,
+}
+
+impl OutputLock {
+    /// Takes the lock on `out`, or says which output is busy.
+    pub fn take(out: &Path) -> Result<Self> {
+        let path = with_suffix(out, ".lock");
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| TilerError::output(&path, e))?;
+        match file.try_lock() {
+            Ok(()) => Ok(Self { _file: file, path }),
+            Err(std::fs::TryLockError::WouldBlock) => Err(TilerError::output(
+                out,
+                format!(
+                    "another globus tile is writing it (it holds {}); wait for it or choose another --out",
+                    path.display()
+                ),
+            )),
+            Err(std::fs::TryLockError::Error(e)) => Err(TilerError::output(&path, e)),
+        }
+    }
+}
+
+impl Drop for OutputLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// What `--force` may replace: an MBTiles or PMTiles archive (by its first bytes, not its
+/// name) or a pyramid directory; never a device, a FIFO or an unrelated file (as root,
+/// `--out /dev/null --force` deleted `/dev/null`).
+fn check_replaceable(out: &Path, kind: &str) -> Result<()> {
+    let meta = std::fs::symlink_metadata(out).map_err(|e| TilerError::output(out, e))?;
+    let refuse = |what: &str| {
+        Err(TilerError::output(
+            out,
+            format!("--force refuses to replace it: {what}"),
+        ))
+    };
+    if meta.file_type().is_symlink() {
+        return refuse("it is a symbolic link");
+    }
+    let magic: &[u8] = match kind {
+        "mbtiles" => b"SQLite format 3\0",
+        "pmtiles" => b"PMTiles",
+        _ if meta.is_dir() => return Ok(()),
+        _ => return refuse("it is not a directory, so not a tile pyramid"),
+    };
+    if !meta.is_file() {
+        return refuse("it is not a regular file (a device, FIFO or directory)");
+    }
+    let mut head = vec![0u8; magic.len()];
+    let read =
+        std::fs::File::open(out).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head));
+    if read.is_err() || head != magic {
+        return refuse(&format!("it is not an {} archive", kind.to_uppercase()));
+    }
+    Ok(())
+}
+
 /// Removes a directory for `--force`, but only one that holds nothing but a pyramid
 /// (numbered level directories and `metadata.json`): a mistyped `--out ~` must not
 /// delete a home directory.
 fn remove_tile_dir(dir: &Path) -> Result<()> {
-    if !dir.is_dir() {
-        return std::fs::remove_file(dir).map_err(|e| TilerError::output(dir, e));
-    }
     let entries = std::fs::read_dir(dir).map_err(|e| TilerError::output(dir, e))?;
     for entry in entries {
         let entry = entry.map_err(|e| TilerError::output(dir, e))?;
