@@ -60,12 +60,18 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
     if !bytes.starts_with(b"\x89PNG") {
         return describe_quantized_mesh(&args.input, &bytes);
     }
-    let encoding = match &args.encoding {
-        Some(name) => ElevationEncoding::parse(name).with_context(|| {
+    let parse = |name: &str| {
+        ElevationEncoding::parse(name).with_context(|| {
             format!("unknown elevation encoding {name:?} (use terrarium, mapbox or centimetre)")
-        })?,
-        None => bail!(
-            "{}: pass --encoding to decode an elevation PNG",
+        })
+    };
+    let encoding = match (&args.encoding, pyramid_encoding(&args.input)?) {
+        (Some(name), _) => parse(name)?,
+        (None, Some((meta, name))) => {
+            parse(&name).with_context(|| format!("the encoding of {}", meta.display()))?
+        }
+        (None, None) => bail!(
+            "{}: pass --encoding to decode an elevation PNG (it is not in a pyramid whose metadata.json names one)",
             args.input.display()
         ),
     };
@@ -96,8 +102,14 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
     }
     times.sort_by(f64::total_cmp);
     let measured = mesh.max_error(&grid);
+    let (lo, hi) = grid
+        .heights()
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
     let mut report = json!({
         "input": args.input.display().to_string(),
+        "encoding": format!("{encoding:?}").to_lowercase(),
+        "height_range_m": [lo, hi],
         "method": args.method,
         "grid": grid.side(),
         "resampled_from": resampled_from,
@@ -271,11 +283,53 @@ fn tile_from_path(scheme: TilingScheme, path: &Path) -> Option<TileKey> {
 
 /// Decodes an elevation PNG; a 2^k-sample corner grid (what `globus tile` writes) is
 /// resampled bilinearly onto 2^k + 1 samples over the same extent.
+/// The encoding the `metadata.json` of the pyramid holding `input` (`ROOT/Z/X/Y.png`) names,
+/// with that file's path; `None` outside a pyramid.
+fn pyramid_encoding(input: &Path) -> anyhow::Result<Option<(PathBuf, String)>> {
+    let Some(root) = input.ancestors().nth(3) else {
+        return Ok(None);
+    };
+    let meta = root.join("metadata.json");
+    if !meta.is_file() {
+        return Ok(None);
+    }
+    let text = globus_tiling::files::read_text_capped(&meta, globus_tiling::files::MAX_TEXT_BYTES)
+        .with_context(|| format!("reading {}", meta.display()))?;
+    let v: Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", meta.display()))?;
+    Ok(v["encoding"]
+        .as_str()
+        .map(|e| (meta.clone(), e.to_string())))
+}
+
+/// Refuses a PNG whose pixels cannot hold an RGB elevation encoding: greyscale, 16-bit or
+/// palette images (decoded as Terrarium before, without a word).
+fn check_rgb_png(path: &Path, bytes: &[u8], encoding: ElevationEncoding) -> anyhow::Result<()> {
+    // The IHDR chunk follows the 8-byte signature: length, "IHDR", width, height, bit depth,
+    // colour type.
+    let (Some(&depth), Some(&colour)) = (bytes.get(24), bytes.get(25)) else {
+        bail!("{}: truncated PNG header", path.display());
+    };
+    let kind = match colour {
+        0 => "greyscale",
+        3 => "palette",
+        4 => "greyscale with alpha",
+        2 | 6 if depth == 8 => return Ok(()),
+        2 | 6 => "16-bit colour",
+        _ => "unknown colour type",
+    };
+    bail!(
+        "{}: a {kind} PNG cannot hold {encoding:?} heights, which need 8-bit RGB(A) pixels (is it an image tile, or another encoding?)",
+        path.display()
+    )
+}
+
 fn read_elevation_png(
     path: &Path,
     bytes: &[u8],
     encoding: ElevationEncoding,
 ) -> anyhow::Result<(HeightGrid, Option<usize>)> {
+    check_rgb_png(path, bytes, encoding)?;
     let mut reader =
         image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Png);
     let mut limits = image::Limits::default();
@@ -293,6 +347,18 @@ fn read_elevation_png(
     }
     let side = w as usize;
     let heights: Vec<f32> = img.pixels().map(|p| encoding.decode(p.0) as f32).collect();
+    if let Some((i, h)) = heights
+        .iter()
+        .enumerate()
+        .find(|(_, h)| h.is_nan() || h.abs() > globus_terrain::MAX_ABS_HEIGHT_M as f32)
+    {
+        bail!(
+            "{}: pixel ({}, {}) decodes to {h} m as {encoding:?}, beyond any height on a planet (wrong --encoding?)",
+            path.display(),
+            i % side,
+            i / side
+        );
+    }
     if let Ok(grid) = HeightGrid::new(side, heights.clone()) {
         return Ok((grid, None));
     }

@@ -425,6 +425,25 @@ fn bad_input_gets_one_line() {
     .encode(false);
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     let out = dir.join("x.terrain");
+    // Pixels that cannot hold an RGB encoding (decoded as Terrarium before, without a word).
+    let grey = dir.join("grey.png");
+    image::save_buffer(&grey, &vec![90u8; 33 * 33], 33, 33, image::ColorType::L8).unwrap();
+    let grey16 = dir.join("grey16.png");
+    let g16: Vec<u8> = (0..33 * 33).flat_map(|_| 1000u16.to_be_bytes()).collect();
+    image::save_buffer(&grey16, &g16, 33, 33, image::ColorType::L16).unwrap();
+    let colour16 = dir.join("colour16.png");
+    image::save_buffer(
+        &colour16,
+        &vec![7u8; 33 * 33 * 6],
+        33,
+        33,
+        image::ColorType::Rgb16,
+    )
+    .unwrap();
+    // Random colours read as Mapbox: heights of up to 1.6e6 m.
+    let noise = dir.join("noise.png");
+    let rgb: Vec<u8> = (0..33 * 33 * 3).map(|i| (i * 7919 % 251) as u8).collect();
+    image::save_buffer(&noise, &rgb, 33, 33, image::ColorType::Rgb8).unwrap();
     // A valid mesh request for `input`, then `extra` arguments.
     let mesh = |input: &Path, extra: &[&str]| {
         let mut args = vec!["--in".to_owned(), s(input).to_owned()];
@@ -469,6 +488,20 @@ fn bad_input_gets_one_line() {
             vec!["elevation"],
         ),
         (mesh(&png, &["--method", "fast"]), vec!["fast"]),
+        (mesh(&grey, &[]), vec!["grey.png", "greyscale PNG"]),
+        (mesh(&grey16, &[]), vec!["grey16.png", "greyscale PNG"]),
+        (mesh(&colour16, &[]), vec!["colour16.png", "16-bit colour"]),
+        (
+            own(&[
+                "--in",
+                s(&noise),
+                "--encoding",
+                "mapbox",
+                "--max-error",
+                "5",
+            ]),
+            vec!["noise.png", "beyond any height", "wrong --encoding"],
+        ),
         (mesh(&odd, &[]), vec!["odd.png", "2^k"]),
         (mesh(&wide, &[]), vec!["wide.png", "not square"]),
         (own(&["--in", s(&junk)]), vec!["junk.terrain"]),
@@ -583,5 +616,39 @@ fn normals_agree_across_tile_edges_in_a_pyramid() {
     assert!(
         lonely_east < side / 2 && lonely_south < side / 2,
         "one-sided edge normals agree at {lonely_east} and {lonely_south} of {side} vertices"
+    );
+}
+
+/// A tile inside a pyramid (`ROOT/Z/X/Y.png`) takes its encoding from the pyramid's
+/// `metadata.json` when --encoding is not given.
+#[test]
+fn a_pyramid_tile_reads_its_encoding_from_the_metadata() {
+    let root = scratch("pyramid_encoding");
+    let dir = root.join("7").join("68");
+    std::fs::create_dir_all(&dir).unwrap();
+    let tile = dir.join("19.png");
+    let heights = srtm_window(65, 0, 640);
+    let mut rgb = Vec::new();
+    for &h in &heights {
+        rgb.extend_from_slice(&ElevationEncoding::Mapbox.encode(f64::from(h)));
+    }
+    image::save_buffer(&tile, &rgb, 65, 65, image::ColorType::Rgb8).unwrap();
+    fails_with_one_line(
+        &["mesh", "--in", s(&tile), "--max-error", "1"],
+        &["19.png", "--encoding"],
+    );
+    std::fs::write(root.join("metadata.json"), r#"{"encoding": "mapbox"}"#).unwrap();
+    let d = globus_json(&["mesh", "--in", s(&tile), "--max-error", "1", "--json"]);
+    // Decoded as Mapbox (as Terrarium the heights would be tens of kilometres off).
+    assert!(d["max_error_m"].as_f64().unwrap() <= 1.0, "{d}");
+    assert_eq!(d["encoding"], "mapbox", "{d}");
+    let lo = heights.iter().copied().fold(f32::MAX, f32::min);
+    let got = d["height_range_m"][0].as_f64().unwrap();
+    // Mapbox steps are 0.1 m.
+    assert!((got - f64::from(lo)).abs() <= 0.1, "{d}: lowest {lo}");
+    std::fs::write(root.join("metadata.json"), r#"{"encoding": "float"}"#).unwrap();
+    fails_with_one_line(
+        &["mesh", "--in", s(&tile), "--max-error", "1"],
+        &["metadata.json", "float"],
     );
 }

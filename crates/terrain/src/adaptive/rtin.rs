@@ -24,7 +24,10 @@
 //! their children's midpoints. Refining every triangle whose midpoint value exceeds
 //! `max_error` then gives a conforming mesh (both triangles sharing a hypotenuse split
 //! together, and a triangle only splits when its parent did) whose error is at most
-//! `max_error`, up to f32 rounding of about 1e-4 m. Each level costs about one pass over the
+//! `max_error`: the errors are computed in f32, so the mesh is cut at `max_error` less the
+//! rounding those computations can make for the grid's largest height (8 ulps of it: 5e-4 m
+//! for Earth's relief, 0.8 m for the 1.6e6 m a wrong encoding decodes), and the bound holds
+//! whatever the heights. Each level costs about one pass over the
 //! grid (samples on a triangle's legs are left to its children, which hold them against the
 //! same line); how the passes are vectorised is in [`levels`]. Figures against martini:
 //! `tools/compare-meshers.py`, summarised in the README.
@@ -40,6 +43,8 @@ pub struct Rtin {
     side: usize,
     /// Per sample: the refinement error stored at it as a hypotenuse midpoint (0 at corners).
     errors: Vec<f32>,
+    /// How far the stored errors may be below the true ones from f32 rounding, metres.
+    rounding_m: f32,
 }
 
 impl Rtin {
@@ -53,6 +58,7 @@ impl Rtin {
         let mut rtin = Self {
             side: grid.side(),
             errors: Vec::new(),
+            rounding_m: 0.0,
         };
         rtin.rebuild(grid, scratch);
         rtin
@@ -67,6 +73,8 @@ impl Rtin {
             &mut scratch.levels,
             &mut self.errors,
         );
+        let highest = grid.heights().iter().fold(0.0f32, |m, h| m.max(h.abs()));
+        self.rounding_m = 8.0 * f32::EPSILON * highest;
     }
 
     /// Samples per side of the grid.
@@ -123,7 +131,11 @@ impl Rtin {
         let mut builder = MeshBuilder {
             side,
             errors: &self.errors,
-            max_error: max_error as f32,
+            max_error: if max_error < 0.0 {
+                max_error as f32
+            } else {
+                (max_error as f32 - self.rounding_m).max(0.0)
+            },
             max_leg: max_leg.max(1),
             index_of,
             mesh,
@@ -193,6 +205,25 @@ mod tests {
     use super::*;
     use crate::adaptive::test_grids::{assert_covers, random, rough};
     use proptest::prelude::*;
+
+    /// A wrong encoding decoded noise to heights of 1.6e6 m, and the mesh's measured error
+    /// (5.031 m) exceeded its own 5 m bound from f32 rounding: the bound holds at any height.
+    #[test]
+    fn the_bound_holds_for_heights_far_above_any_planet() {
+        for (offset, relief) in [(0.0f32, 1.6e6f32), (1.6e6, 40.0), (-1e6, 3e5)] {
+            let grid = rough(129, 7, relief);
+            let h = grid.heights().iter().map(|h| h + offset).collect();
+            let grid = HeightGrid::new(129, h).expect("grid");
+            let rtin = Rtin::new(&grid);
+            for bound in [0.5, 5.0, 50.0] {
+                let got = rtin.mesh(bound).max_error(&grid);
+                assert!(
+                    got <= bound,
+                    "offset {offset}, relief {relief}: {got} > {bound}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn flat_grid_is_two_triangles() {
