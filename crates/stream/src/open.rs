@@ -145,41 +145,109 @@ struct Meta {
     tms: bool,
 }
 
-fn meta_from_json(j: &serde_json::Value) -> Meta {
-    let level = |k: &str| {
-        j[k].as_u64()
-            .or_else(|| j[k].as_str().and_then(|s| s.parse().ok()))
-            .and_then(|v| u8::try_from(v).ok())
+/// Reads a container's metadata (`metadata.json`, the MBTiles `metadata` table, a PMTiles
+/// header), refusing every field that is present but makes no sense with an error naming
+/// `origin` and the field: a nonsense value used to become a default without a word
+/// (`"scheme": "mars"` gave Web Mercator and the terrain vanished). `strings` accepts numbers
+/// written as text (MBTiles keeps every value as text).
+fn meta_from_json(origin: &str, j: &serde_json::Value, strings: bool) -> Result<Meta, OpenError> {
+    use serde_json::Value;
+    let bad =
+        |field: &str, why: String| OpenError::Invalid(format!("{origin}: metadata {field}: {why}"));
+    let text = |k: &str| -> Result<Option<&str>, OpenError> {
+        match &j[k] {
+            Value::Null => Ok(None),
+            Value::String(s) => Ok(Some(s.as_str())),
+            other => Err(bad(k, format!("{other} is not text"))),
+        }
+    };
+    let whole = |k: &str, lo: u64, hi: u64| -> Result<Option<u64>, OpenError> {
+        let v = match &j[k] {
+            Value::Null => return Ok(None),
+            Value::Number(n) => n.as_u64(),
+            Value::String(s) if strings => s.trim().parse::<u64>().ok(),
+            _ => None,
+        };
+        match v {
+            Some(v) if (lo..=hi).contains(&v) => Ok(Some(v)),
+            _ => Err(bad(
+                k,
+                format!("{} is not a whole number from {lo} to {hi}", j[k]),
+            )),
+        }
+    };
+    let max_level = u64::from(globus_tiling::TileKey::MAX_LEVEL);
+    let scheme = match text("scheme")? {
+        None => None,
+        // Some writers name the row numbering here, not the projection.
+        Some(s) if s.eq_ignore_ascii_case("tms") || s.eq_ignore_ascii_case("xyz") => None,
+        Some(s) => Some(s.parse::<TilingScheme>().map_err(|e| bad("scheme", e.0))?),
+    };
+    let grid = match text("sample_grid")? {
+        None => None,
+        Some("corners") => Some(SampleGrid::Corners),
+        Some("cells") => Some(SampleGrid::Cells),
+        Some(g) => return Err(bad("sample_grid", format!("{g:?} (corners or cells)"))),
+    };
+    let format = match text("format")? {
+        None => None,
+        Some(f @ ("png" | "jpg" | "jpeg" | "webp" | "terrain")) => Some(f.to_string()),
+        Some(f) => {
+            return Err(bad(
+                "format",
+                format!("{f:?} is not a raster tile format Globus reads (png, jpg, webp, terrain)"),
+            ));
+        }
+    };
+    let tms = match text("layout")? {
+        None | Some("xyz") => false,
+        Some("tms") => true,
+        Some(l) => return Err(bad("layout", format!("{l:?} (xyz or tms)"))),
     };
     let bounds = match &j["bounds"] {
-        serde_json::Value::Array(a) => {
-            let v: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
-            <[f64; 4]>::try_from(v).ok()
+        Value::Null => None,
+        b => {
+            let v: Option<Vec<f64>> = match b {
+                Value::Array(a) => a.iter().map(Value::as_f64).collect(),
+                Value::String(s) => s.split(',').map(|x| x.trim().parse().ok()).collect(),
+                _ => None,
+            };
+            let Some([w, s, e, n]) = v.and_then(|v| <[f64; 4]>::try_from(v).ok()) else {
+                return Err(bad(
+                    "bounds",
+                    format!("{b} is not four numbers west, south, east, north"),
+                ));
+            };
+            if !(w < e && s < n && w >= -180.0 && e <= 180.0 && s >= -90.0 && n <= 90.0) {
+                return Err(bad(
+                    "bounds",
+                    format!(
+                        "[{w}, {s}, {e}, {n}] is not west < east within +-180 and south < north within +-90"
+                    ),
+                ));
+            }
+            Some([w, s, e, n])
         }
-        serde_json::Value::String(s) => {
-            let v: Vec<f64> = s.split(',').filter_map(|x| x.trim().parse().ok()).collect();
-            <[f64; 4]>::try_from(v).ok()
-        }
-        _ => None,
     };
-    Meta {
-        scheme: j["scheme"].as_str().and_then(|s| s.parse().ok()),
-        min: level("minzoom"),
-        max: level("maxzoom"),
-        tile_size: j["tile_size"]
-            .as_u64()
-            .or_else(|| j["tile_size"].as_str().and_then(|s| s.parse().ok()))
-            .and_then(|v| u32::try_from(v).ok()),
-        grid: match j["sample_grid"].as_str() {
-            Some("corners") => Some(SampleGrid::Corners),
-            Some("cells") => Some(SampleGrid::Cells),
-            _ => None,
-        },
-        encoding: j["encoding"].as_str().map(str::to_string),
-        bounds,
-        format: j["format"].as_str().map(str::to_string),
-        tms: j["layout"].as_str() == Some("tms"),
+    let min = whole("minzoom", 0, max_level)?.map(|v| v as u8);
+    let max = whole("maxzoom", 0, max_level)?.map(|v| v as u8);
+    if let (Some(lo), Some(hi)) = (min, max)
+        && lo > hi
+    {
+        return Err(bad("minzoom", format!("{lo} is above maxzoom {hi}")));
     }
+    let tile_size = whole("tile_size", 2, 4096)?.map(|v| v as u32);
+    Ok(Meta {
+        scheme,
+        min,
+        max,
+        tile_size,
+        grid,
+        encoding: text("encoding")?.map(str::to_string),
+        bounds,
+        format,
+        tms,
+    })
 }
 
 /// How an elevation layer's tiles encode heights.
@@ -282,7 +350,7 @@ pub fn open_layer(
                 let j = pm_meta(&p);
                 (Arc::new(p), j)
             };
-        (fetch, meta_from_json(&json))
+        (fetch, meta_from_json(url, &json, false)?)
     } else if url.ends_with(".mbtiles") {
         if is_http {
             return Err(spec_error(format!(
@@ -296,7 +364,7 @@ pub fn open_layer(
                 .map(|(k, v)| (k.clone(), serde_json::Value::from(v.as_str())))
                 .collect(),
         );
-        let mut meta = meta_from_json(&j);
+        let mut meta = meta_from_json(url, &j, true)?;
         meta.scheme = Some(m.scheme());
         (Arc::new(m), meta)
     } else if is_http && url.contains('{') {
@@ -324,7 +392,7 @@ pub fn open_layer(
         let base = url.trim_end_matches('/');
         let meta_url = format!("{base}/metadata.json");
         let json = served_metadata(client, &meta_url, disk_cache)?;
-        let meta = meta_from_json(&json);
+        let meta = meta_from_json(&meta_url, &json, false)?;
         let ext = meta.format.clone().unwrap_or_else(|| "png".into());
         let row = if meta.tms { "{-y}" } else { "{y}" };
         let template = format!("{base}/{{z}}/{{x}}/{row}.{ext}");
@@ -352,7 +420,7 @@ pub fn open_layer(
         })?;
         let json: serde_json::Value = serde_json::from_str(&text)
             .map_err(|e| OpenError::Invalid(format!("{}: {e}", meta_path.display())))?;
-        let meta = meta_from_json(&json);
+        let meta = meta_from_json(&meta_path.display().to_string(), &json, false)?;
         let ext = meta.format.clone().unwrap_or_else(|| "png".into());
         let row = if meta.tms { "{-y}" } else { "{y}" };
         let scheme = meta.scheme.unwrap_or(TilingScheme::WebMercator);
@@ -560,5 +628,51 @@ mod tests {
         }
         let t: SourceSpec = toml::from_str("url = \"a.pmtiles\"\nmaxzoom = 3\n").unwrap();
         assert_eq!(t.maxzoom, Some(3));
+    }
+
+    /// Nonsense in a container's metadata became a default without a word ("scheme": "mars"
+    /// gave Web Mercator and the terrain vanished): each is one error naming the file and field.
+    #[test]
+    fn nonsense_metadata_names_the_file_and_the_field() {
+        let good = serde_json::json!({
+            "scheme": "geographic", "minzoom": 0, "maxzoom": 12, "tile_size": 256,
+            "sample_grid": "corners", "format": "png", "encoding": "terrarium",
+            "bounds": [11.0, 57.0, 12.0, 58.0], "layout": "xyz"
+        });
+        let m = meta_from_json("p/metadata.json", &good, false).unwrap();
+        assert_eq!(m.scheme, Some(TilingScheme::Geographic));
+        assert_eq!((m.min, m.max, m.tile_size), (Some(0), Some(12), Some(256)));
+        // MBTiles keeps numbers as text.
+        let mb = serde_json::json!({"minzoom": "2", "maxzoom": "9", "bounds": "-180,-85,180,85"});
+        assert_eq!(meta_from_json("a.mbtiles", &mb, true).unwrap().max, Some(9));
+        for (field, value) in [
+            ("scheme", serde_json::json!("mars")),
+            ("sample_grid", serde_json::json!("hexagons")),
+            ("format", serde_json::json!("gif")),
+            ("minzoom", serde_json::json!(99)),
+            ("maxzoom", serde_json::json!(-1)),
+            ("bounds", serde_json::json!([12.0, 57.0, 11.0, 58.0])),
+            ("bounds", serde_json::json!([11.0, 58.0, 12.0, 57.0])),
+            ("bounds", serde_json::json!([11.0, 57.0, 12.0])),
+            ("tile_size", serde_json::json!(-256)),
+            ("tile_size", serde_json::json!("256")),
+            ("tile_size", serde_json::json!(256.5)),
+            ("layout", serde_json::json!("spiral")),
+        ] {
+            let mut j = good.clone();
+            j[field] = value.clone();
+            let e = match meta_from_json("p/metadata.json", &j, false) {
+                Ok(_) => panic!("{field} = {value} was accepted"),
+                Err(e) => e.to_string(),
+            };
+            assert!(e.contains("p/metadata.json") && e.contains(field), "{e}");
+        }
+        let mut j = good.clone();
+        j["minzoom"] = serde_json::json!(13);
+        let e = meta_from_json("p/metadata.json", &j, false)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("above maxzoom 12"), "{e}");
     }
 }
