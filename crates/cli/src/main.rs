@@ -79,13 +79,22 @@ fn ensure_runtime_dir() {}
 /// Logs to stderr, filtered by `RUST_LOG` (e.g. `RUST_LOG=globus_stream=debug`); warnings
 /// and errors only when it is not set.
 fn init_logging() {
+    use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"));
-    let _ = tracing_subscriber::fmt()
+    let verbose = std::env::var_os("RUST_LOG").is_some();
+    let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
-        .with_target(false)
-        .try_init();
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_target(verbose);
+    // A warning is a line for a person ("globus: warning: ..." in spirit); timestamps only
+    // when someone asked for a log.
+    let _ = if verbose {
+        builder.try_init()
+    } else {
+        builder.without_time().try_init()
+    };
 }
 
 fn main() {

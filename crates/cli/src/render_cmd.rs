@@ -49,6 +49,23 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         frame = off.render_complete_reporting(&view, timeout, &mut [], &mut show)?;
     }
     progress.finish();
+    // Tiles that failed for good are drawn over with coarser data: say so, per layer.
+    let failures: Vec<_> = off
+        .globe()
+        .layer_failures()
+        .into_iter()
+        .filter(|f| f.tiles > 0)
+        .collect();
+    for f in &failures {
+        let kinds: Vec<String> = f.by_kind.iter().map(|(k, n)| format!("{n} {k}")).collect();
+        tracing::warn!(
+            "{}: {} tiles failed ({}); first: {}",
+            f.layer,
+            f.tiles,
+            kinds.join(", "),
+            f.first.join("; ")
+        );
+    }
     if !frame.complete {
         tracing::warn!(
             "gave up waiting for tiles after {:.1} s; the picture is coarser than the SSE bound asks",
@@ -78,7 +95,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "select_us": r.select_us,
             "select_cpu_us": r.select_cpu_us,
             "load_ms": frame.load_ms,
-            "complete": frame.complete,
+            // Everything wanted drawn from its own data: no tile gave up, none failed.
+            "complete": frame.complete && failures.is_empty(),
+            "failures": failures.iter().map(|f| json!({
+                "layer": f.layer,
+                "tiles": f.tiles,
+                "by_kind": f.by_kind,
+                "first": f.first,
+            })).collect::<Vec<_>>(),
             "tiles_loaded": off.globe().layer().scheduler_stats().loaded,
             "gpu_tile_bytes": per_slot * u64::from(r.pool.resident),
             "gpu_pool_bytes": r.pool.gpu_bytes,

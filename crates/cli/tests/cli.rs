@@ -365,3 +365,50 @@ fn failed_writes_leave_the_old_file_whole_and_one_path_is_not_two_outputs() {
     assert_eq!(std::fs::read(&png).unwrap(), b"the old picture");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Imagery that failed for good (every tile a 403) gave no stderr line, `complete: true` and
+/// no failure counts: now one line per failing layer, its counts in the stats, and the frame
+/// is not complete (it was drawn without the imagery asked for).
+#[test]
+fn imagery_failures_are_reported_per_layer() {
+    use globus_test_support::http::{Fault, FaultServer};
+    let server = FaultServer::in_memory();
+    server.add_fault("/", Fault::Status(403), None);
+    let imagery = server.url("/{z}/{x}/{y}.png");
+    let dir = std::env::temp_dir().join(format!("globus-cli-403-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("denied.png");
+    let stats = dir.join("denied.json");
+    let out = globus(&[
+        "render",
+        "--camera",
+        "-120,10,20000000,0,-90",
+        "--size",
+        "96x64",
+        "--imagery",
+        &imagery,
+        "--out",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+        "--timeout-s",
+        "60",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("tiles failed") && err.contains("HTTP 403"),
+        "{err}"
+    );
+    assert!(
+        err.contains("127.0.0.1"),
+        "the failing URLs are named: {err}"
+    );
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    assert_eq!(s["complete"], false, "{s}");
+    let f = &s["failures"][0];
+    assert!(f["by_kind"]["HTTP 403"].as_u64().unwrap_or(0) > 0, "{s}");
+    assert_eq!(f["tiles"], f["by_kind"]["HTTP 403"], "{s}");
+    assert!(server.count("/") > 0);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -260,6 +260,13 @@ impl Globe {
         &self.selection.draw
     }
 
+    /// Each data layer's tiles that failed for good so far (counts by kind, the first few
+    /// URLs): what an application should tell its user, since the globe draws on over them
+    /// with coarser data.
+    pub fn layer_failures(&self) -> Vec<globus_stream::pyramid::LayerFailures> {
+        self.layer().source().layer_failures()
+    }
+
     /// The data layer (scheduler, cache and counters).
     pub fn layer(&self) -> &TerrainLayer {
         &self.layer

@@ -87,6 +87,18 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     let dir = globus_test_support::output_dir("real_earth");
     save_png(&frame.image, &dir.join("earth_over_http.png")).expect("save");
     assert!(frame.complete, "tiles still loading");
+    // The tile that never decodes is reported, once, by its layer; the retried ones are not.
+    let failures = off.globe().layer_failures();
+    assert_eq!(failures.len(), 2, "{failures:?}");
+    let (topo, bmng) = (&failures[0], &failures[1]);
+    assert!(
+        topo.layer.contains("/topo/") && bmng.layer.contains("/bmng/"),
+        "{failures:?}"
+    );
+    assert_eq!(topo.tiles, 1, "{topo:?}");
+    assert_eq!(topo.by_kind.get("undecodable"), Some(&1), "{topo:?}");
+    assert!(topo.first[0].contains("/topo/1/2/0.png"), "{topo:?}");
+    assert_eq!(bmng.tiles, 0, "{bmng:?}");
 
     // No hole inside the silhouette: rays that hit the ellipsoid 16 km below the surface must
     // hit terrain. The sea is the lowest surface here, but the broken level-1 tile is drawn

@@ -153,6 +153,49 @@ pub struct RasterPyramid<T: Samples> {
     /// Fetches under way: a second caller for the same tile (a neighbour's ring read racing
     /// the tile's own load) waits for the first instead of asking the server again.
     in_flight: Mutex<FxHashMap<TileKey, Arc<Flight<T>>>>,
+    /// Tiles that failed for good, for the user to be told.
+    failures: Mutex<LayerFailures>,
+}
+
+/// How many of the first failures a layer keeps the message of.
+const FIRST_FAILURES_KEPT: usize = 3;
+
+/// The tiles of one layer that failed for good (HTTP 403s, undecodable bytes, HTML where a
+/// WMS image should be): how many, by kind, and the first few messages (each naming its URL
+/// or file). Retried transient failures do not count.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LayerFailures {
+    /// The layer (its URL template, archive or directory).
+    pub layer: String,
+    /// Tiles that failed.
+    pub tiles: u64,
+    /// Counts by kind: `HTTP 403`, `undecodable`, `other`.
+    pub by_kind: std::collections::BTreeMap<String, u64>,
+    /// The first few failures' messages.
+    pub first: Vec<String>,
+}
+
+impl LayerFailures {
+    fn record(&mut self, kind: String, message: &str) {
+        self.tiles += 1;
+        *self.by_kind.entry(kind).or_insert(0) += 1;
+        if self.first.len() < FIRST_FAILURES_KEPT {
+            self.first.push(message.to_string());
+        }
+    }
+}
+
+/// The kind of a fetch failure's message: its HTTP status where it has one.
+fn failure_kind(message: &str) -> String {
+    message
+        .match_indices("HTTP ")
+        .find_map(|(i, _)| {
+            let code = message.get(i + 5..i + 8)?;
+            code.bytes()
+                .all(|b| b.is_ascii_digit())
+                .then(|| format!("HTTP {code}"))
+        })
+        .unwrap_or_else(|| "other".into())
 }
 
 /// A fetch under way, and its result once it lands.
@@ -211,6 +254,7 @@ impl<T: Samples> RasterPyramid<T> {
             cache_bytes,
             failing: Mutex::new(FxHashMap::default()),
             in_flight: Mutex::new(FxHashMap::default()),
+            failures: Mutex::new(LayerFailures::default()),
         }
     }
 
@@ -308,10 +352,19 @@ impl<T: Samples> RasterPyramid<T> {
     fn fetch_and_keep(&self, key: TileKey, cancel: &Cancel) -> Result<Option<Arc<T>>, FetchError> {
         let entry = match self.fetch.fetch(key, cancel) {
             Ok(None) => Ok(None),
-            Ok(Some(f)) => self
-                .decode_checked(key, &f.bytes)
-                .map(|t| Some(Arc::new(t))),
-            Err(e @ FetchError::Permanent(_)) => Err(e),
+            Ok(Some(f)) => match self.decode_checked(key, &f.bytes) {
+                Ok(t) => Ok(Some(Arc::new(t))),
+                Err(e) => {
+                    self.record_failure("undecodable".into(), &e);
+                    Err(e)
+                }
+            },
+            Err(e @ FetchError::Permanent(_)) => {
+                if let FetchError::Permanent(m) = &e {
+                    self.record_failure(failure_kind(m), &e);
+                }
+                Err(e)
+            }
             Err(e) => {
                 if let FetchError::Transient { retry_after, .. } = &e {
                     let quiet = retry_after.map_or(NEIGHBOUR_QUIET, |r| r.max(NEIGHBOUR_QUIET));
@@ -350,6 +403,24 @@ impl<T: Samples> RasterPyramid<T> {
         }
         c.bytes += bytes;
         entry
+    }
+
+    fn record_failure(&self, kind: String, e: &FetchError) {
+        self.failures
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .record(kind, &e.to_string());
+    }
+
+    /// The tiles that failed for good so far.
+    pub fn failures(&self) -> LayerFailures {
+        let mut f = self
+            .failures
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone();
+        f.layer = self.fetch.name().to_string();
+        f
     }
 
     /// Like [`RasterPyramid::tile`], for samples a tile reads beyond its own edges: a tile

@@ -692,6 +692,12 @@ impl TerrainSource for RasterTerrainSource {
         &self.ellipsoid
     }
 
+    fn layer_failures(&self) -> Vec<crate::pyramid::LayerFailures> {
+        let elevation = self.elevation.iter().map(|p| p.failures());
+        let imagery = self.imagery.iter().map(|p| p.failures());
+        elevation.chain(imagery).collect()
+    }
+
     fn occluder(&self) -> &Ellipsoid {
         &self.occluder
     }

@@ -234,6 +234,10 @@ impl TerrainSource for RefinedSource {
         bases + self.inner.cached_bytes()
     }
 
+    fn layer_failures(&self) -> Vec<crate::pyramid::LayerFailures> {
+        self.inner.layer_failures()
+    }
+
     fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
         // Only bases already loaded: this runs on the render thread, and the inner source may
         // be a network service.

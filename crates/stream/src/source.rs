@@ -74,6 +74,10 @@ pub trait TerrainSource: TileSource<Tile = TerrainData> {
     fn cached_bytes(&self) -> usize {
         0
     }
+    /// Each data layer's tiles that failed for good so far (none for a procedural source).
+    fn layer_failures(&self) -> Vec<crate::pyramid::LayerFailures> {
+        Vec::new()
+    }
     /// The full-resolution surface height at a longitude and latitude (radians), metres, if
     /// the source can answer without loading tiles (a procedural source can; an archive
     /// cannot, and the engine then reads its loaded tiles).
