@@ -389,11 +389,29 @@ impl<S: TileSource + ?Sized> Drop for Scheduler<S> {
         self.shared.wake.notify_all();
         // Dropping the receiver releases workers blocked on a full channel.
         self.results = None;
+        // A load that ignores its cancellation (a read that never returns) must not hold the
+        // program: wait a moment for each worker, then leave it behind (it holds only its own
+        // reference to the source, and ends with the process).
+        let deadline = Instant::now() + SHUTDOWN_WAIT;
         for w in self.workers.drain(..) {
-            let _ = w.join();
+            while !w.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            if w.is_finished() {
+                let _ = w.join();
+            } else {
+                tracing::warn!(
+                    "a tile loader of {} did not stop within {} s of being cancelled; leaving it behind",
+                    self.shared.source.name(),
+                    SHUTDOWN_WAIT.as_secs()
+                );
+            }
         }
     }
 }
+
+/// How long dropping a scheduler waits for its workers to stop.
+pub const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
 
 fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Tile>>) {
     // Loading is background work: somewhat below the render thread (about nice 5 on Linux),
@@ -631,6 +649,33 @@ mod tests {
         let many: Vec<TileRequest> = (0..500).map(|x| req(x % 60, f64::from(x))).collect();
         s.submit(&many);
         drop(s);
+    }
+
+    /// A load that never returns and ignores its cancellation (a loader blocked on a FIFO):
+    /// the process never exited. Dropping the scheduler now returns after SHUTDOWN_WAIT.
+    #[test]
+    fn a_stuck_loader_does_not_hold_the_shutdown() {
+        let src = Arc::new(Recorder {
+            order: Mutex::new(Vec::new()),
+            gate: Mutex::new(false),
+            started: AtomicUsize::new(0),
+        });
+        let s = Scheduler::new(Arc::clone(&src), 2);
+        s.submit(&[req(1, 1.0)]);
+        eventually("the load starts", || {
+            src.started.load(Ordering::SeqCst) == 1
+        });
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        std::thread::spawn(move || {
+            drop(s);
+            let _ = tx.send(());
+        });
+        let ended = rx.recv_timeout(SHUTDOWN_WAIT * 10);
+        *src.gate.lock().unwrap() = true;
+        assert!(
+            ended.is_ok(),
+            "dropping the scheduler waited on the stuck loader"
+        );
     }
 
     /// A clock the test moves by hand.
