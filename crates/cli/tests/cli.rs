@@ -121,6 +121,11 @@ fn bad_arguments_end_with_one_clear_line() {
             "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --sse 1e-300",
             "error bound",
         ),
+        // The frame's targets are counted: 8192 x 8192 needs more than the default 1 GiB.
+        (
+            "render --camera 0,0,1000,0,0 --size 8192x8192 --out OUT",
+            "memory budget of 1024 MiB is too small",
+        ),
         // The missing argument is named.
         ("geo ecef 7.6 46", "<HEIGHT>"),
         (

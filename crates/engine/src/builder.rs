@@ -264,6 +264,8 @@ impl GlobeBuilder {
         if let Some(source) = &self.source {
             return Ok(Arc::clone(source));
         }
+        // Before opening anything: 5,000 layers would each be opened first.
+        self.check()?;
         let budgets = self.source_budgets();
         let refined = |data: Arc<dyn TerrainSource>| -> Arc<dyn TerrainSource> {
             Arc::new(
@@ -411,6 +413,14 @@ impl GlobeBuilder {
                     });
                 }
             }
+        }
+        let layers = self.terrain.len() + self.imagery.len();
+        if layers > crate::memory::MAX_LAYERS {
+            return Err(invalid(
+                "layers",
+                layers as f64,
+                "must be at most 64 terrain and imagery layers together",
+            ));
         }
         if self.gpu_slots == 0 || self.gpu_slots > crate::memory::MAX_GPU_TILES {
             return Err(invalid(
@@ -566,5 +576,40 @@ impl Settings {
             uploads_per_frame: self.uploads_per_frame,
             ..TilePoolOptions::with_slots(slots, GPU_POOL_FILL)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn refused(b: &GlobeBuilder, needle: &str) {
+        match b.open_source() {
+            Ok(_) => panic!("accepted; wanted an error with {needle:?}"),
+            Err(e) => assert!(e.to_string().contains(needle), "{e}"),
+        }
+    }
+
+    /// Budget-like settings at the extremes took gigabytes (a billion GPU slots, 5,000
+    /// layers, an error bound of 1e-300): each is refused before anything is opened.
+    #[test]
+    fn absurd_settings_are_refused_before_anything_is_opened() {
+        let mut b = GlobeBuilder::new();
+        for i in 0..65 {
+            // Paths that do not exist: opening any of them would fail differently.
+            b.imagery(SourceSpec::parse(&format!("/nonexistent/layer-{i}")).expect("spec"));
+        }
+        refused(&b, "layers 65");
+        refused(GlobeBuilder::new().gpu_tiles(1_000_000_000), "GPU tiles");
+        refused(GlobeBuilder::new().workers(0), "workers");
+        refused(GlobeBuilder::new().workers(10_000), "workers");
+        refused(GlobeBuilder::new().max_sse_px(1e-300), "error bound");
+        if let Some(ram) = crate::memory::physical_bytes() {
+            refused(
+                GlobeBuilder::new().memory_budget(Some(ram + (1 << 30))),
+                "this machine has",
+            );
+        }
+        assert!(GlobeBuilder::new().gpu_tiles(65_536).open_source().is_ok());
     }
 }

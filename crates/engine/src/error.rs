@@ -23,7 +23,7 @@ pub enum EngineError {
     Layers(#[source] globus_stream::fetch::OpenError),
     /// The memory budget cannot hold the process and a usable cache and pool.
     #[error(
-        "a memory budget of {total_mib} MiB is too small: this process already holds \
+        "a memory budget of {total_mib} MiB is too small: this process and its frame already hold \
          {baseline_mib} MiB before any tile, and with {workers} loader threads it needs at \
          least {least_mib} MiB"
     )]

@@ -33,6 +33,9 @@ use crate::frame::plan::{FramePlan, Motion};
 use crate::frame::select::ResidentOracle;
 use crate::frame::upload::make_resident;
 use crate::memory::{MemoryPlan, resident_bytes};
+
+/// Bytes per pixel of a frame's targets: colour, its read-back copy, depth and the id buffer.
+const FRAME_BYTES_PER_PIXEL: u64 = 16;
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use crate::query::{self, TerrainHeight};
 use crate::{EngineError, GlobeBuilder};
@@ -154,10 +157,16 @@ impl Globe {
             .viewport
             .map(|(w, h)| FrameTargets::new(device, w, h));
         let workers = settings.layer_workers;
+        // The frame's own pixels, counted in full: a driver maps target pages only as they
+        // are first drawn, so the footprint measured now misses most of them (an 8192 x 8192
+        // frame took 2.6 GB under a 1 GiB budget).
+        let frame_bytes = settings.viewport.map_or(0, |(w, h)| {
+            u64::from(w) * u64::from(h) * FRAME_BYTES_PER_PIXEL
+        });
         let memory = match settings.memory_bytes {
             Some(total) => Some(MemoryPlan::new(
                 total,
-                resident_bytes(),
+                resident_bytes().map(|r| r + frame_bytes),
                 // The terrain layer's loaders and as many for colour.
                 2 * workers,
                 settings.source_caches,

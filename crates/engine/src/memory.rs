@@ -166,6 +166,9 @@ pub fn physical_bytes() -> Option<u64> {
 /// a billion slots took 4.9 GB of bookkeeping before any GPU memory).
 pub const MAX_GPU_TILES: u32 = 65_536;
 
+/// The most terrain and imagery layers a globe composites (5,000 layers took 7.8 GB).
+pub const MAX_LAYERS: usize = 64;
+
 /// The most tile loader threads.
 pub const MAX_WORKERS: usize = 256;
 

@@ -184,6 +184,10 @@ impl OutputLock {
     /// Takes the lock on `out`, or says which output is busy.
     pub fn take(out: &Path) -> Result<Self> {
         let path = with_suffix(out, ".lock");
+        // The folder the output goes in, as the sinks make it.
+        if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(|e| TilerError::output(parent, e))?;
+        }
         let file = std::fs::OpenOptions::new()
             .write(true)
             .create(true)
