@@ -73,14 +73,7 @@ fn bad_inputs_end_with_one_line_naming_the_file() {
     let grey = globus_test_support::shared_data("earth-topology-2048x1024.png");
     // A FIFO would block the reader for ever; /dev/zero (behind a link) never ends.
     let fifo = dir.join("world-fifo.jpg");
-    let _ = std::fs::remove_file(&fifo);
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    globus_test_support::mkfifo(&fifo);
     let zero = dir.join("zero.jpg");
     let _ = std::fs::remove_file(&zero);
     std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
@@ -377,13 +370,7 @@ fn force_replaces_only_its_own_kind_of_output() {
     let plain = dir.join("pyramid");
     std::fs::write(&plain, "a text file where a pyramid directory would go").unwrap();
     let fifo = dir.join("pipe.pmtiles");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    globus_test_support::mkfifo(&fifo);
     for (out, needle) in [
         (&notes, "not an MBTILES archive"),
         (&plain, "not a directory"),

@@ -170,9 +170,7 @@ mod tests {
     fn only_regular_files_are_read_and_never_more_than_the_cap() {
         let d = scratch("kinds");
         let fifo = d.join("fifo.png");
-        let _ = std::fs::remove_file(&fifo);
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()), "mkfifo {}", fifo.display());
+        globus_test_support::mkfifo(&fifo);
         for p in [fifo.as_path(), Path::new("/dev/zero"), d.as_path()] {
             let e = read_capped(p, 1 << 20).unwrap_err();
             assert_eq!(e.kind(), ErrorKind::InvalidInput, "{}: {e}", p.display());

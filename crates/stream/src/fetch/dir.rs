@@ -137,9 +137,7 @@ mod tests {
         let root = std::env::temp_dir().join(format!("globus-dirfifo-{}", std::process::id()));
         std::fs::create_dir_all(root.join("2/1")).unwrap();
         let fifo = root.join("2/1/1.png");
-        let _ = std::fs::remove_file(&fifo);
-        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
-        assert!(made.is_ok_and(|s| s.success()));
+        globus_test_support::mkfifo(&fifo);
         let big = std::fs::File::create(root.join("2/1/0.png")).unwrap();
         big.set_len(6 << 30).unwrap();
         let f = DirectoryFetch::new(&root, "{z}/{x}/{y}.png", TilingScheme::Geographic).unwrap();
