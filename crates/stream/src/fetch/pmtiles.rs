@@ -279,6 +279,10 @@ fn inflate(name: &str, what: &str, bytes: &[u8], codec: u8) -> Result<Vec<u8>, F
     }
 }
 
+/// How deep leaf directories may nest (the writers nest one level; the specification allows
+/// more, a directory that points at itself would loop).
+const MAX_LEAF_DEPTH: usize = 4;
+
 impl<R: RangeRead> PmTilesFetch<R> {
     /// Opens the archive behind `reader`.
     pub fn open(reader: R) -> Result<Self, OpenError> {
@@ -292,6 +296,28 @@ impl<R: RangeRead> PmTilesFetch<R> {
             .read_range(0, HEADER_LEN as u64, &cancel)
             .map_err(unreadable)?;
         let header = Header::parse(&head).map_err(|m| invalid("", &m))?;
+        // Raster tiles Globus decodes (0: unknown, told by the tiles' own bytes).
+        match header.tile_type {
+            0 | 2..=4 => {}
+            1 => {
+                return Err(invalid(
+                    "",
+                    &"holds vector tiles (MVT); Globus reads raster tiles",
+                ));
+            }
+            5 => {
+                return Err(invalid(
+                    "",
+                    &"holds AVIF tiles; Globus reads PNG, JPEG and WebP",
+                ));
+            }
+            t => {
+                return Err(invalid(
+                    "",
+                    &format!("has tile type {t}, which PMTiles does not define"),
+                ));
+            }
+        }
         let part = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, OpenError> {
             if len > MAX_PART_BYTES {
                 return Err(invalid(what, &format!(" of {len} bytes is too large")));
@@ -417,7 +443,7 @@ impl<R: RangeRead> Fetch for PmTilesFetch<R> {
         }
         let id = tile_id(z, key.x(), key.y());
         let mut entry = find_entry(&self.root, id);
-        for _ in 0..4 {
+        for _ in 0..MAX_LEAF_DEPTH {
             match entry {
                 Some(e) if e.run_length == 0 => {
                     let dir = self.leaf(e.offset, e.length, cancel)?;
@@ -425,6 +451,13 @@ impl<R: RangeRead> Fetch for PmTilesFetch<R> {
                 }
                 _ => break,
             }
+        }
+        if let Some(e) = entry.filter(|e| e.run_length == 0) {
+            return Err(FetchError::Permanent(format!(
+                "{} tile {key}: leaf directories nest deeper than {MAX_LEAF_DEPTH} (the one at {} refers to itself?)",
+                self.reader.name(),
+                e.offset
+            )));
         }
         let Some(e) = entry.filter(|e| e.run_length > 0) else {
             return Ok(None);
@@ -443,5 +476,90 @@ impl<R: RangeRead> Fetch for PmTilesFetch<R> {
                 .read_range(self.header.data.0 + e.offset, u64::from(e.length), cancel)?;
         let bytes = inflate(name, "tile", &raw, self.header.tile_compression)?;
         Ok((!bytes.is_empty()).then(|| Fetched::local(bytes)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use globus_tiling::pmtiles::{Header, encode_directory};
+
+    /// An archive in memory.
+    struct Bytes(Vec<u8>);
+
+    impl RangeRead for Bytes {
+        fn name(&self) -> &str {
+            "crafted.pmtiles"
+        }
+        fn read_range(&self, offset: u64, len: u64, _: &Cancel) -> Result<Vec<u8>, FetchError> {
+            let (a, b) = (offset as usize, (offset + len) as usize);
+            self.0
+                .get(a..b)
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| FetchError::Permanent("beyond the end".into()))
+        }
+    }
+
+    /// An uncompressed archive whose root points every tile at a leaf directory that points
+    /// at itself, of `tile_type`.
+    fn crafted(tile_type: u8) -> Bytes {
+        let leaf = encode_directory(&[Entry {
+            tile_id: 0,
+            offset: 0,
+            length: 0,
+            run_length: 0,
+        }]);
+        let leaf = {
+            // The leaf's own length is known only once encoded: encode again with it.
+            let n = leaf.len() as u32;
+            let again = encode_directory(&[Entry {
+                tile_id: 0,
+                offset: 0,
+                length: n,
+                run_length: 0,
+            }]);
+            assert_eq!(again.len() as u32, n);
+            again
+        };
+        let root = encode_directory(&[Entry {
+            tile_id: 0,
+            offset: 0,
+            length: leaf.len() as u32,
+            run_length: 0,
+        }]);
+        let root_at = HEADER_LEN as u64;
+        let leaves_at = root_at + root.len() as u64;
+        let header = Header {
+            root: (root_at, root.len() as u64),
+            metadata: (leaves_at, 0),
+            leaves: (leaves_at, leaf.len() as u64),
+            data: (leaves_at + leaf.len() as u64, 0),
+            internal_compression: compression::NONE,
+            tile_compression: compression::NONE,
+            tile_type,
+            min_zoom: 0,
+            max_zoom: 3,
+            ..Header::default()
+        };
+        let mut bytes = header.to_bytes().to_vec();
+        bytes.extend(root);
+        bytes.extend(leaf);
+        Bytes(bytes)
+    }
+
+    /// A leaf directory that refers to itself was "no data" without a word; tile type 99 was
+    /// accepted: both are errors naming the archive.
+    #[test]
+    fn self_referencing_leaves_and_unknown_tile_types_are_refused() {
+        let p = PmTilesFetch::open(crafted(2)).expect("a well-formed header");
+        let e = p.fetch(TileKey::new(0, 0, 0), &Cancel::new()).unwrap_err();
+        assert!(e.to_string().contains("refers to itself"), "{e}");
+        for (t, needle) in [(99, "tile type 99"), (1, "vector"), (5, "AVIF")] {
+            let e = PmTilesFetch::open(crafted(t))
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(e.contains("crafted.pmtiles") && e.contains(needle), "{e}");
+        }
     }
 }
