@@ -420,4 +420,13 @@ mod tests {
         }
         std::fs::remove_dir_all(&dir).ok();
     }
+
+    /// Mutations of two config files: every one is read or refused with a line, none panics.
+    #[test]
+    fn fuzz_config() {
+        let r = globus_test_support::fuzz::run("config", |b| {
+            std::str::from_utf8(b).is_ok_and(|t| parse(t).is_ok())
+        });
+        assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
+    }
 }

@@ -335,4 +335,14 @@ mod tests {
         }
         assert!(decode_quantized_mesh(b"not a mesh at all", 5).is_err());
     }
+
+    /// Mutations of PNG, JPEG and WebP tiles: every one decodes within the limits or is
+    /// refused, none panics.
+    #[test]
+    fn fuzz_image() {
+        let r = globus_test_support::fuzz::run("image", |b| {
+            decode_image(b, DecodeLimits::default()).is_ok()
+        });
+        assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
+    }
 }

@@ -675,4 +675,19 @@ mod tests {
             .to_string();
         assert!(e.contains("above maxzoom 12"), "{e}");
     }
+
+    /// Mutations of the metadata.json files `globus tile` writes, read as a directory's and
+    /// as MBTiles' (text numbers): every one parses or is refused, none panics.
+    #[test]
+    fn fuzz_metadata() {
+        let r = globus_test_support::fuzz::run("metadata", |b| {
+            let Ok(j) = serde_json::from_slice::<serde_json::Value>(b) else {
+                return false;
+            };
+            let dir = meta_from_json("metadata.json", &j, false).is_ok();
+            let mb = meta_from_json("a.mbtiles", &j, true).is_ok();
+            dir || mb
+        });
+        assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
+    }
 }

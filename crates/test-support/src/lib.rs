@@ -5,8 +5,10 @@
 //! * [`image`](mod@image): reading, comparing and inspecting rendered frames.
 //! * [`http::FaultServer`]: a real HTTP server on 127.0.0.1 that injects faults.
 //! * [`shared_data`]: the path of a file in `../shared/data`.
+//! * [`fuzz`]: a deterministic mutation fuzzer for readers of outside bytes.
 //! * [`eventually`]: waiting (in real time, bounded) for other threads to reach a state.
 
+pub mod fuzz;
 pub mod http;
 pub mod image;
 mod oracle;

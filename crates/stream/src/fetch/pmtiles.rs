@@ -562,4 +562,25 @@ mod tests {
             assert!(e.contains("crafted.pmtiles") && e.contains(needle), "{e}");
         }
     }
+
+    /// Mutations of a real archive: opening and reading every tile returns, never panics.
+    #[test]
+    fn fuzz_pmtiles() {
+        let r = globus_test_support::fuzz::run("pmtiles", |b| {
+            let Ok(p) = PmTilesFetch::open(Bytes(b.to_vec())) else {
+                return false;
+            };
+            let c = Cancel::new();
+            let mut ok = true;
+            for key in [
+                TileKey::new(0, 0, 0),
+                TileKey::new(0, 1, 0),
+                TileKey::new(1, 2, 1),
+            ] {
+                ok &= p.fetch(key, &c).is_ok();
+            }
+            ok
+        });
+        assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
+    }
 }

@@ -222,3 +222,10 @@ proptest! {
         let _ = QuantizedMesh::decode(&bytes);
     }
 }
+
+/// Mutations of real tiles (plain and gzip'd): every one decodes or is refused, none panics.
+#[test]
+fn fuzz_quantized_mesh() {
+    let r = globus_test_support::fuzz::run("quantized-mesh", |b| QuantizedMesh::decode(b).is_ok());
+    assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
+}

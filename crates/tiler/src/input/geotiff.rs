@@ -31,6 +31,10 @@ pub enum GeoTiff {
 /// Decoded chunks a streamed GeoTIFF keeps in memory by default, in bytes.
 pub const CHUNK_CACHE_BYTES: usize = 512 << 20;
 
+/// The most values one TIFF tag may hold (a tiled GeoTIFF of 2^22 tiles of 256 x 256 would
+/// hold 2.7e14 pixels).
+pub const MAX_TAG_VALUES: usize = 1 << 22;
+
 /// The most pixels a side a GeoTIFF may declare (a whole Earth at 1 m is 4e7).
 pub const MAX_SIDE: usize = 1 << 26;
 
@@ -263,9 +267,16 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff> {
     let file = crate::input::open_regular(path)?;
     let file_len = file.metadata().map_err(|e| TilerError::io(path, e))?.len();
     let bad = |e: tiff::TiffError| TilerError::bad_input(path, format!("TIFF: {e}"));
-    // No tag can hold more values than the file has bytes; chunks are read by hand below.
+    // No tag can hold more values than the file has bytes, nor more than MAX_TAG_VALUES (the
+    // tiff crate sizes a tag's vector from its declared count: the fuzzer found a 137 GB one);
+    // chunks are read by hand below.
     let mut limits = Limits::unlimited();
     limits.ifd_value_size = usize::try_from(file_len).unwrap_or(usize::MAX);
+    let values = usize::try_from(file_len)
+        .unwrap_or(usize::MAX)
+        .min(MAX_TAG_VALUES);
+    limits.decoding_buffer_size =
+        values.saturating_mul(std::mem::size_of::<tiff::decoder::ifd::Value>());
     let mut dec = Decoder::new(BufReader::new(file))
         .map_err(bad)?
         .with_limits(limits);
@@ -1007,5 +1018,29 @@ mod tests {
         let utm = [(1024, 1), (3072, 32633)];
         let e = crs_of(Path::new("utm.tif"), &utm).unwrap_err().to_string();
         assert!(e.contains("utm.tif") && e.contains("EPSG:32633"), "{e}");
+    }
+
+    /// Mutations of GDAL-written GeoTIFFs (tiled Deflate i16, LZW-predicted f32 strips with
+    /// nodata, RGB in Web Mercator): every one is read to its last row or refused, none panics.
+    #[test]
+    fn fuzz_geotiff() {
+        let dir = std::env::temp_dir().join(format!("globus-fuzz-tiff-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("case.tif");
+        let r = globus_test_support::fuzz::run("geotiff", |b| {
+            std::fs::write(&path, b).unwrap();
+            fn rows<T: Copy + Default>(s: &dyn RowSource<T>) -> bool {
+                let mut row = vec![T::default(); s.width()];
+                (0..s.height()).all(|y| s.read_row(y, 0, &mut row).is_ok())
+            }
+            match read_geotiff(&path) {
+                Err(_) => false,
+                Ok(GeoTiff::Elevation(_)) => true,
+                Ok(GeoTiff::ElevationStream(s)) => rows(s.as_ref()),
+                Ok(GeoTiff::Image { source, .. }) => rows(source.as_ref()),
+            }
+        });
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(r.cases > 0 && r.accepted < r.cases, "{r:?}");
     }
 }
