@@ -2,8 +2,9 @@
 //! on stable Rust (cargo-fuzz needs nightly and a network to set up; what matters here is
 //! that every reader meets thousands of damaged inputs on every CI run).
 //!
-//! Each reader has a corpus of valid inputs in `fuzz/corpus/READER/` (kept in the
-//! repository; files Globus itself writes, no third-party data). [`run`] mutates them (bit
+//! Each reader has a corpus of valid inputs in `fuzz/seeds/READER/` (kept in the
+//! repository; files Globus or GDAL wrote from made-up values, no third-party data; the
+//! ignored `fuzz/corpus` is the working corpus of the nightly cargo-fuzz target in `fuzz/`). [`run`] mutates them (bit
 //! flips, bytes set to boundary values, 32-bit fields set to huge or negative numbers,
 //! truncation, chunks duplicated or removed) with a fixed seed and hands each to the reader,
 //! which must return (Ok or Err) without panicking. The budget is [`DEFAULT_CASES`] inputs per
@@ -27,7 +28,7 @@ pub struct FuzzReport {
 
 /// The corpus of `reader`, sorted by name.
 pub fn corpus(reader: &str) -> Vec<Vec<u8>> {
-    let dir = crate::workspace_root().join("fuzz/corpus").join(reader);
+    let dir = crate::workspace_root().join("fuzz/seeds").join(reader);
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("fuzz corpus {}: {e}", dir.display()))
         .flatten()
