@@ -102,7 +102,8 @@ impl CachedFetch {
         std::fs::create_dir_all(&root)
             .map_err(|e| OpenError::Unreadable(format!("disk cache {}: {e}", root.display())))?;
         // Note which origin the folder belongs to (for people looking at the cache).
-        let _ = std::fs::write(root.join("ORIGIN"), inner.name());
+        // (Whole or not at all, and never into a FIFO planted there, which would block.)
+        let _ = globus_tiling::files::write_atomic(&root.join("ORIGIN"), inner.name().as_bytes());
         let bytes = folder_bytes(&options.dir);
         Ok(Self {
             inner,
@@ -119,7 +120,10 @@ impl CachedFetch {
         let held = folder_bytes(&self.root);
         let _ = std::fs::remove_dir_all(&self.root);
         let _ = std::fs::create_dir_all(&self.root);
-        let _ = std::fs::write(self.root.join("ORIGIN"), self.inner.name());
+        let _ = globus_tiling::files::write_atomic(
+            &self.root.join("ORIGIN"),
+            self.inner.name().as_bytes(),
+        );
         let total = self.bytes.load(Ordering::Relaxed);
         self.bytes
             .store(total.saturating_sub(held), Ordering::Relaxed);
@@ -271,5 +275,48 @@ impl Fetch for CachedFetch {
             },
             Err(e) => Err(e),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fetch::DirectoryFetch;
+    use globus_tiling::TilingScheme;
+
+    /// FIFOs planted in the cache folder (as its ORIGIN note and as a cached tile) blocked a
+    /// loader for ever: the cache opens, the tile comes from its origin, and the FIFO is
+    /// replaced by the fresh entry.
+    #[test]
+    fn fifos_in_the_cache_folder_block_nothing() {
+        let base = std::env::temp_dir().join(format!("globus-cache-fifo-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        let tiles = base.join("tiles");
+        std::fs::create_dir_all(tiles.join("1/0")).unwrap();
+        std::fs::write(tiles.join("1/0/0.png"), b"tile bytes").unwrap();
+        let inner =
+            DirectoryFetch::new(&tiles, "{z}/{x}/{y}.png", TilingScheme::Geographic).unwrap();
+        let cache_dir = base.join("cache");
+        let root = cache_dir.join(format!("{:016x}", origin_hash(inner.name())));
+        std::fs::create_dir_all(root.join("1/0")).unwrap();
+        globus_test_support::mkfifo(&root.join("ORIGIN"));
+        globus_test_support::mkfifo(&root.join("1/0/0"));
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        std::thread::spawn(move || {
+            let options = DiskCacheOptions {
+                dir: cache_dir,
+                max_bytes: 1 << 20,
+                default_fresh_for: Duration::from_secs(60),
+            };
+            let got = CachedFetch::new(Box::new(inner), options)
+                .map(|c| c.fetch(TileKey::new(1, 0, 0), &Cancel::new()));
+            let _ = tx.send(got.map(|r| r.map(|f| f.map(|f| f.bytes))));
+        });
+        let got = rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the cache blocked on a FIFO");
+        assert_eq!(got.unwrap().unwrap().unwrap(), b"tile bytes");
+        assert!(std::fs::metadata(root.join("1/0/0")).unwrap().is_file());
+        std::fs::remove_dir_all(&base).ok();
     }
 }
