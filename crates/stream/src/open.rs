@@ -179,9 +179,7 @@ fn meta_from_json(origin: &str, j: &serde_json::Value, strings: bool) -> Result<
     let max_level = u64::from(globus_tiling::TileKey::MAX_LEVEL);
     let scheme = match text("scheme")? {
         None => None,
-        // Some writers name the row numbering here, not the projection.
-        Some(s) if s.eq_ignore_ascii_case("tms") || s.eq_ignore_ascii_case("xyz") => None,
-        Some(s) => Some(s.parse::<TilingScheme>().map_err(|e| bad("scheme", e.0))?),
+        Some(s) => TilingScheme::parse_container(s).map_err(|e| bad("scheme", e.0))?,
     };
     let grid = match text("sample_grid")? {
         None => None,

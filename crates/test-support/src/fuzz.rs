@@ -133,9 +133,5 @@ pub fn run(reader: &str, read: impl Fn(&[u8]) -> bool) -> FuzzReport {
         }
         report.cases += 1;
     }
-    eprintln!(
-        "fuzz {reader}: {} inputs, {} accepted",
-        report.cases, report.accepted
-    );
     report
 }

@@ -241,6 +241,19 @@ impl FromStr for TilingScheme {
     }
 }
 
+impl TilingScheme {
+    /// The scheme a container's metadata names (`metadata.json`, an MBTiles `scheme` row):
+    /// `None` for `tms` or `xyz`, which some writers put there to name the row order, not the
+    /// projection; an error for anything else that is not a scheme.
+    pub fn parse_container(s: &str) -> Result<Option<Self>, ParseTileNameError> {
+        if s.eq_ignore_ascii_case("tms") || s.eq_ignore_ascii_case("xyz") {
+            Ok(None)
+        } else {
+            s.parse().map(Some)
+        }
+    }
+}
+
 impl fmt::Display for TilingScheme {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())

@@ -110,16 +110,12 @@ impl MbTilesFetch {
         };
         conn.prepare("SELECT tile_data FROM tiles LIMIT 0")
             .map_err(err("tiles"))?;
-        let scheme = match metadata.get("scheme").map(String::as_str) {
-            None => TilingScheme::WebMercator,
-            // Some writers name the row numbering here, not the projection.
-            Some(s) if s.eq_ignore_ascii_case("tms") || s.eq_ignore_ascii_case("xyz") => {
-                TilingScheme::WebMercator
-            }
-            Some(s) => s.parse().map_err(|e: globus_tiling::ParseTileNameError| {
-                OpenError::Invalid(format!("MBTiles {name}: metadata scheme: {e}"))
-            })?,
-        };
+        let scheme = match metadata.get("scheme") {
+            None => None,
+            Some(s) => TilingScheme::parse_container(s)
+                .map_err(|e| OpenError::Invalid(format!("MBTiles {name}: metadata scheme: {e}")))?,
+        }
+        .unwrap_or(TilingScheme::WebMercator);
         Ok(Self {
             path: path.to_path_buf(),
             name: path.display().to_string(),
