@@ -1,0 +1,169 @@
+//! [`load_file`]: a whole file read into [`Feature`]s, every problem a [`FeatureWarning`]
+//! naming the feature, and logged (the first [`LOGGED_WARNINGS`] in full, then a count, so a
+//! file of a million bad features does not flood the log or memory).
+
+use std::path::{Path, PathBuf};
+
+use crate::feature::{Feature, from_geojson};
+use crate::read::{ReadError, read_file};
+use crate::style::StyleRules;
+
+/// Warnings logged and kept per file; the rest are counted.
+pub const LOGGED_WARNINGS: usize = 20;
+
+/// A problem with one feature.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FeatureWarning {
+    /// The feature's index in its file.
+    pub index: usize,
+    /// What is wrong (and what was done about it).
+    pub message: String,
+}
+
+/// What a file gave.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Loaded {
+    /// The file.
+    pub path: PathBuf,
+    /// The features with something to draw.
+    pub features: Vec<Feature>,
+    /// Features in the file, drawable or not.
+    pub read: usize,
+    /// The first [`LOGGED_WARNINGS`] warnings.
+    pub warnings: Vec<FeatureWarning>,
+    /// All warnings, kept or not.
+    pub warning_count: usize,
+    /// Why the read ended early, if it did.
+    pub stopped: Option<String>,
+}
+
+/// Reads and styles every feature of `path`.
+pub fn load_file(path: &Path, rules: &StyleRules) -> Result<Loaded, ReadError> {
+    let mut loaded = Loaded {
+        path: path.to_owned(),
+        ..Default::default()
+    };
+    let mut messages = Vec::new();
+    let summary = read_file(path, &mut |index, raw| {
+        messages.clear();
+        match raw {
+            Ok(f) => {
+                if let Some(f) = from_geojson(index, f, rules, &mut messages) {
+                    loaded.features.push(f);
+                }
+            }
+            Err(e) => messages.push(format!("{e} (left out)")),
+        }
+        for message in messages.drain(..) {
+            loaded.warning_count += 1;
+            if loaded.warnings.len() < LOGGED_WARNINGS {
+                tracing::warn!("{}: feature {index}: {message}", path.display());
+                loaded.warnings.push(FeatureWarning { index, message });
+            }
+        }
+    })?;
+    loaded.read = summary.features;
+    if loaded.warning_count > LOGGED_WARNINGS {
+        tracing::warn!(
+            "{}: {} more warnings not shown",
+            path.display(),
+            loaded.warning_count - LOGGED_WARNINGS
+        );
+    }
+    if let Some(why) = &summary.stopped {
+        tracing::warn!(
+            "{}: reading stopped {why}; the {} features before are drawn",
+            path.display(),
+            summary.features
+        );
+    }
+    loaded.stopped = summary.stopped;
+    Ok(loaded)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::style::Clamp;
+
+    fn data(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data").join(name)
+    }
+
+    #[test]
+    fn every_country_loads_without_a_warning() {
+        let l = load_file(&data("countries-110m.geojson"), &StyleRules::default()).unwrap();
+        assert_eq!(l.read, 177);
+        assert_eq!(l.features.len(), 177);
+        // Natural Earth's 1:110m USA (Alaska, at 141 W) and Sudan rings cross themselves by
+        // a few metres: warned about, drawn all the same.
+        let crossing: Vec<usize> = l.warnings.iter().map(|w| w.index).collect();
+        assert_eq!(crossing, [4, 14]);
+        assert!(l.warnings.iter().all(|w| w.message.contains("crosses itself")));
+        let antarctica = l
+            .features
+            .iter()
+            .find(|f| f.properties["name"] == "Antarctica")
+            .unwrap();
+        assert!(antarctica.polygons.iter().any(|p| p[0].iter().any(|q| q[1] == -90.0)));
+    }
+
+    #[test]
+    fn every_fir_extrudes_to_its_own_limits() {
+        let rules = StyleRules::from_fragment("extrude=true").unwrap();
+        let l = load_file(&data("eurocontrol-firs.geojson"), &rules).unwrap();
+        assert_eq!(l.read, 58);
+        assert_eq!(l.features.len(), 58, "{:?}", l.warnings);
+        for f in &l.features {
+            let (lo, hi) = f.style.extrude.unwrap_or_else(|| panic!("{:?}", f.properties));
+            assert!(lo >= 0.0 && hi > lo && hi <= 999.0 * 100.0 * crate::style::FOOT_M, "{lo} {hi}");
+            assert_eq!(f.style.clamp, Clamp::Absolute);
+        }
+    }
+
+    #[test]
+    fn the_toulouse_airspace_reads_in_flight_levels() {
+        let l = load_file(&data("airspace-LFBOTMA.json"), &StyleRules::default()).unwrap();
+        assert!(l.features.len() >= 2, "{}", l.features.len());
+        assert_eq!(l.warnings, []);
+        let (lo, hi) = l.features[0].style.extrude.unwrap();
+        assert_eq!((lo, hi), (0.0, 6500.0 * crate::style::FOOT_M));
+    }
+
+    #[test]
+    fn bad_features_are_each_named_and_the_rest_kept() {
+        let dir = std::env::temp_dir().join(format!("globus-vector-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bad.geojson");
+        let mut text = String::from(r#"{"type": "FeatureCollection", "features": ["#);
+        let good = r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [1, 2]}}"#;
+        let bad = [
+            r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Circle", "coordinates": [1, 2]}}"#,
+            r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": ["a", 2]}}"#,
+            r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1]]]}}"#,
+            r#"{"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[0, 0], [0, 95]]}}"#,
+        ];
+        for k in 0..100 {
+            if k > 0 {
+                text.push(',');
+            }
+            text.push_str(if k % 10 == 3 { bad[k / 10 % 4] } else { good });
+        }
+        text.push_str("]}");
+        std::fs::write(&path, text).unwrap();
+        let l = load_file(&path, &StyleRules::default()).unwrap();
+        assert_eq!(l.read, 100);
+        assert_eq!(l.features.len(), 90);
+        assert_eq!(l.warning_count, 10);
+        assert_eq!(
+            l.warnings.iter().map(|w| w.index).collect::<Vec<_>>(),
+            (0..10).map(|k| k * 10 + 3).collect::<Vec<_>>()
+        );
+        let e = load_file(&dir.join("missing.geojson"), &StyleRules::default()).unwrap_err();
+        assert!(e.to_string().contains("missing.geojson"), "{e}");
+        std::fs::write(&path, "name,lat,lon\nx,1,2\n").unwrap();
+        let e = load_file(&path, &StyleRules::default()).unwrap_err();
+        assert!(e.to_string().contains("not GeoJSON"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,466 @@
+//! How a feature is drawn: the simplestyle properties (`stroke`, `stroke-width`,
+//! `stroke-opacity`, `fill`, `fill-opacity`, `marker-color`, `marker-size`, `marker-symbol`;
+//! mapbox/simplestyle-spec 1.1.0) plus Globus's own: `extrude`, `lower`, `upper` (vertical
+//! limits with units `m`, `ft` or `FL`), `clamp` (`ground` drapes, `absolute` keeps the
+//! coordinates' third value as metres above the ellipsoid, `relative` above the ground),
+//! `path` (`geodesic` or `rhumb`) and `marker-outline`.
+//!
+//! Each value is looked up, in order, in the layer's overrides (`--vector FILE#key=value`),
+//! the feature's properties, the layer's defaults (config file), and the built-in defaults
+//! (simplestyle's, but for lines, which default to 2 px: a 1 px hairline vanishes on a
+//! high-DPI screen). A value that does not parse is a warning for that feature and falls back
+//! to the next source.
+
+use serde_json::{Map, Value};
+
+/// An sRGB colour with straight (not premultiplied) alpha.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rgba(pub [u8; 4]);
+
+impl Rgba {
+    /// Parses `#rgb`, `#rrggbb` or `#rrggbbaa` (the `#` optional, as simplestyle allows).
+    pub fn parse(text: &str) -> Option<Self> {
+        let hex = text.trim().strip_prefix('#').unwrap_or(text.trim());
+        let digit = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
+        let b = hex.as_bytes();
+        let pair = |i: usize| Some(digit(b[i])? * 16 + digit(b[i + 1])?);
+        match b.len() {
+            3 => Some(Self([
+                digit(b[0])? * 17,
+                digit(b[1])? * 17,
+                digit(b[2])? * 17,
+                255,
+            ])),
+            6 => Some(Self([pair(0)?, pair(2)?, pair(4)?, 255])),
+            8 => Some(Self([pair(0)?, pair(2)?, pair(4)?, pair(6)?])),
+            _ => None,
+        }
+    }
+
+    /// The colour with its alpha multiplied by `opacity` (0..1).
+    pub fn with_opacity(self, opacity: f64) -> Self {
+        let [r, g, b, a] = self.0;
+        let a = (f64::from(a) * opacity.clamp(0.0, 1.0)).round() as u8;
+        Self([r, g, b, a])
+    }
+
+    /// Packed little-endian RGBA8 (red in the low byte), as shaders unpack it.
+    pub fn packed(self) -> u32 {
+        u32::from_le_bytes(self.0)
+    }
+}
+
+/// What a height is measured from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clamp {
+    /// On the terrain drawn this frame (draped); any third coordinate is ignored.
+    Ground,
+    /// Metres above the ellipsoid.
+    Absolute,
+    /// Metres above the terrain under each vertex.
+    Relative,
+}
+
+/// How a line runs between two vertices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathKind {
+    /// The shortest path on the ellipsoid.
+    Geodesic,
+    /// Constant bearing (a straight line on a Mercator map).
+    Rhumb,
+}
+
+/// A feature's resolved style.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Style {
+    /// Line colour (alpha includes `stroke-opacity`).
+    pub stroke: Rgba,
+    /// Line width, pixels on screen (0: no outline).
+    pub stroke_width_px: f32,
+    /// Fill colour (alpha includes `fill-opacity`).
+    pub fill: Rgba,
+    /// Point symbol colour.
+    pub marker_color: Rgba,
+    /// Point symbol diameter, pixels.
+    pub marker_size_px: f32,
+    /// Point symbol shape.
+    pub marker_square: bool,
+    /// Point outline colour.
+    pub marker_outline: Rgba,
+    /// How heights are measured.
+    pub clamp: Clamp,
+    /// How lines and polygon edges run between vertices.
+    pub path: PathKind,
+    /// Vertical limits of an extruded polygon (lower, upper), metres in `clamp`'s reference
+    /// (`None`: drawn flat).
+    pub extrude: Option<(f64, f64)>,
+}
+
+impl Default for Style {
+    fn default() -> Self {
+        Self {
+            stroke: Rgba([0x55, 0x55, 0x55, 255]),
+            stroke_width_px: 2.0,
+            fill: Rgba([0x55, 0x55, 0x55, 153]),
+            marker_color: Rgba([0x7e, 0x7e, 0x7e, 255]),
+            marker_size_px: 12.0,
+            marker_square: false,
+            marker_outline: Rgba([255, 255, 255, 255]),
+            clamp: Clamp::Ground,
+            path: PathKind::Geodesic,
+            extrude: None,
+        }
+    }
+}
+
+/// Simplestyle's marker sizes, pixels.
+const MARKER_SMALL_PX: f32 = 8.0;
+const MARKER_MEDIUM_PX: f32 = 12.0;
+const MARKER_LARGE_PX: f32 = 18.0;
+
+/// Widest line or largest symbol, pixels.
+pub const MAX_PIXELS: f32 = 256.0;
+
+/// Feet in a metre's units: one international foot.
+pub const FOOT_M: f64 = 0.3048;
+
+/// Parses a vertical limit: a number in `default_unit`, or a number followed by `m`, `ft`
+/// or preceded by `FL` (flight level: hundreds of feet), e.g. `FL195`, `3500 ft`, `120m`,
+/// `"GND"`/`"SFC"` (0). Returns metres.
+pub fn parse_height(value: &Value, default_unit: &str) -> Option<f64> {
+    let (number, unit) = match value {
+        Value::Number(n) => (n.as_f64()?, default_unit.to_owned()),
+        Value::String(s) => {
+            let s = s.trim();
+            let upper = s.to_ascii_uppercase();
+            if matches!(upper.as_str(), "GND" | "SFC") {
+                return Some(0.0);
+            }
+            if let Some(rest) = upper.strip_prefix("FL") {
+                (rest.trim().parse::<f64>().ok()?, "FL".to_owned())
+            } else {
+                let split = s
+                    .find(|c: char| c.is_ascii_alphabetic())
+                    .unwrap_or(s.len());
+                let (n, u) = s.split_at(split);
+                let unit = if u.is_empty() { default_unit } else { u.trim() };
+                (n.trim().parse::<f64>().ok()?, unit.to_owned())
+            }
+        }
+        _ => return None,
+    };
+    let metres = match unit.to_ascii_lowercase().as_str() {
+        "m" => number,
+        "ft" | "feet" => number * FOOT_M,
+        "fl" => number * 100.0 * FOOT_M,
+        _ => return None,
+    };
+    (metres.is_finite() && metres.abs() <= 1.0e7).then_some(metres)
+}
+
+/// Style values by key: overrides, then a feature's properties, then defaults.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StyleRules {
+    /// Values that win over the features' own (`--vector FILE#key=value`).
+    pub overrides: Map<String, Value>,
+    /// Values for features that have none (the config file's).
+    pub defaults: Map<String, Value>,
+}
+
+impl StyleRules {
+    /// Rules from a URL-fragment-like list, `key=value&key=value` with %-escapes (`%23` for
+    /// `#`), as overrides. Errors name the bad pair.
+    pub fn from_fragment(fragment: &str) -> Result<Self, String> {
+        let mut overrides = Map::new();
+        for pair in fragment.split('&').filter(|p| !p.is_empty()) {
+            let (k, v) = pair
+                .split_once('=')
+                .ok_or_else(|| format!("`{pair}` is not key=value"))?;
+            let v = percent_decode(v).ok_or_else(|| format!("`{pair}`: bad %-escape"))?;
+            let k = percent_decode(k).ok_or_else(|| format!("`{pair}`: bad %-escape"))?;
+            if !KEYS.contains(&k.as_str()) {
+                return Err(format!(
+                    "`{k}` is not a style key (one of {})",
+                    KEYS.join(", ")
+                ));
+            }
+            overrides.insert(k, Value::String(v));
+        }
+        Ok(Self {
+            overrides,
+            defaults: Map::new(),
+        })
+    }
+
+    /// Resolves the style of a feature with `properties`; values that do not parse are
+    /// reported in `warnings` (and fall back).
+    pub fn resolve(&self, properties: &Map<String, Value>, warnings: &mut Vec<String>) -> Style {
+        let sources = [&self.overrides, properties, &self.defaults];
+        let get = |key: &str| lookup(&sources, key);
+        let mut style = Style::default();
+        let mut bad = |key: &str, v: &Value| warnings.push(format!("style `{key}`: {v} ignored"));
+        for (key, slot) in [
+            ("stroke", &mut style.stroke),
+            ("marker-color", &mut style.marker_color),
+            ("marker-outline", &mut style.marker_outline),
+        ] {
+            if let Some(v) = get(key) {
+                match colour(v) {
+                    Some(c) => *slot = c,
+                    None => bad(key, v),
+                }
+            }
+        }
+        if let Some(v) = get("fill") {
+            match colour(v) {
+                Some(c) => style.fill = Rgba([c.0[0], c.0[1], c.0[2], style.fill.0[3]]),
+                None => bad("fill", v),
+            }
+        }
+        if let Some(v) = get("stroke-width") {
+            match number(v).filter(|w| (0.0..=f64::from(MAX_PIXELS)).contains(w)) {
+                Some(w) => style.stroke_width_px = w as f32,
+                None => bad("stroke-width", v),
+            }
+        }
+        if let Some(v) = get("marker-size") {
+            let size = match v.as_str() {
+                Some("small") => Some(MARKER_SMALL_PX),
+                Some("medium") => Some(MARKER_MEDIUM_PX),
+                Some("large") => Some(MARKER_LARGE_PX),
+                _ => number(v)
+                    .filter(|s| *s > 0.0 && *s <= f64::from(MAX_PIXELS))
+                    .map(|s| s as f32),
+            };
+            match size {
+                Some(s) => style.marker_size_px = s,
+                None => bad("marker-size", v),
+            }
+        }
+        if let Some(v) = get("marker-symbol") {
+            style.marker_square = matches!(v.as_str(), Some("square"));
+        }
+        if let Some(v) = get("stroke-opacity") {
+            match number(v).filter(|o| (0.0..=1.0).contains(o)) {
+                Some(o) => style.stroke = style.stroke.with_opacity(o),
+                None => bad("stroke-opacity", v),
+            }
+        }
+        if let Some(v) = get("fill-opacity") {
+            match number(v).filter(|o| (0.0..=1.0).contains(o)) {
+                Some(o) => {
+                    let [r, g, b, _] = style.fill.0;
+                    style.fill = Rgba([r, g, b, 255]).with_opacity(o);
+                }
+                None => bad("fill-opacity", v),
+            }
+        }
+        if let Some(v) = get("clamp") {
+            match v.as_str() {
+                Some("ground") => style.clamp = Clamp::Ground,
+                Some("absolute") => style.clamp = Clamp::Absolute,
+                Some("relative") => style.clamp = Clamp::Relative,
+                _ => bad("clamp", v),
+            }
+        }
+        if let Some(v) = get("path") {
+            match v.as_str() {
+                Some("geodesic") => style.path = PathKind::Geodesic,
+                Some("rhumb") => style.path = PathKind::Rhumb,
+                _ => bad("path", v),
+            }
+        }
+        let extrude = match get("extrude") {
+            Some(Value::Bool(b)) => *b,
+            Some(Value::String(s)) if s == "true" => true,
+            Some(Value::String(s)) if s == "false" => false,
+            Some(v) => {
+                bad("extrude", v);
+                false
+            }
+            None => false,
+        };
+        if extrude || get("lower").is_some() || get("upper").is_some() {
+            let unit = get("units").and_then(Value::as_str).unwrap_or("m");
+            let lower = limit(&sources, "lower", ("LOWERLIMIT", "LOWERUNIT"), unit);
+            let upper = limit(&sources, "upper", ("UPPERLIMIT", "UPPERUNIT"), unit);
+            match (lower, upper) {
+                (Some((Some(lo), _)), Some((Some(hi), _))) if lo < hi => {
+                    style.extrude = Some((lo, hi));
+                    if get("clamp").is_none() {
+                        // Vertical limits are altitudes (flight levels, feet AMSL).
+                        style.clamp = Clamp::Absolute;
+                    }
+                }
+                (Some((Some(lo), _)), Some((Some(hi), _))) => warnings.push(format!(
+                    "extrusion: lower limit {lo:.0} m is not below upper limit {hi:.0} m"
+                )),
+                (lo, hi) => {
+                    for (name, l) in [("lower", lo), ("upper", hi)] {
+                        match l {
+                            None => warnings.push(format!("extrusion: no `{name}` limit")),
+                            Some((None, v)) => {
+                                warnings.push(format!("extrusion: `{name}` {v} is not a height"))
+                            }
+                            Some((Some(_), _)) => {}
+                        }
+                    }
+                }
+            }
+        }
+        style
+    }
+}
+
+fn lookup<'a>(sources: &[&'a Map<String, Value>], key: &str) -> Option<&'a Value> {
+    sources
+        .iter()
+        .filter_map(|s| s.get(key))
+        .find(|v| !v.is_null())
+}
+
+fn colour(v: &Value) -> Option<Rgba> {
+    v.as_str().and_then(Rgba::parse)
+}
+
+fn number(v: &Value) -> Option<f64> {
+    match v {
+        Value::Number(n) => n.as_f64(),
+        Value::String(s) => s.trim().parse::<f64>().ok(),
+        _ => None,
+    }
+}
+
+/// A vertical limit from `key` (in `unit`), or EUROCONTROL's pair (`LOWERLIMIT` "195" with
+/// `LOWERUNIT` "FL"): the metres if it parses, and the value as found.
+fn limit(
+    sources: &[&Map<String, Value>],
+    key: &str,
+    eurocontrol: (&str, &str),
+    unit: &str,
+) -> Option<(Option<f64>, Value)> {
+    if let Some(v) = lookup(sources, key) {
+        return Some((parse_height(v, unit), v.clone()));
+    }
+    let v = lookup(sources, eurocontrol.0)?;
+    let u = lookup(sources, eurocontrol.1)
+        .and_then(Value::as_str)
+        .unwrap_or("m");
+    Some((parse_height(v, u), v.clone()))
+}
+
+/// Style keys accepted on the command line and in the config file.
+pub const KEYS: &[&str] = &[
+    "stroke",
+    "stroke-width",
+    "stroke-opacity",
+    "fill",
+    "fill-opacity",
+    "marker-color",
+    "marker-size",
+    "marker-symbol",
+    "marker-outline",
+    "extrude",
+    "lower",
+    "upper",
+    "units",
+    "clamp",
+    "path",
+];
+
+fn percent_decode(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let h = s.get(i + 1..i + 3)?;
+            out.push(u8::from_str_radix(h, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn props(v: Value) -> Map<String, Value> {
+        v.as_object().cloned().unwrap_or_default()
+    }
+
+    #[test]
+    fn colours_parse_as_simplestyle_writes_them() {
+        assert_eq!(Rgba::parse("#ffcc00"), Some(Rgba([255, 204, 0, 255])));
+        assert_eq!(Rgba::parse("f00"), Some(Rgba([255, 0, 0, 255])));
+        assert_eq!(Rgba::parse("#11223380"), Some(Rgba([0x11, 0x22, 0x33, 0x80])));
+        assert_eq!(Rgba::parse("#ff"), None);
+        assert_eq!(Rgba::parse("#gg0000"), None);
+    }
+
+    #[test]
+    fn heights_in_metres_feet_and_flight_levels() {
+        assert_eq!(parse_height(&json!("FL100"), "m"), Some(3048.0));
+        assert_eq!(parse_height(&json!(65.0), "FL"), Some(6500.0 * FOOT_M));
+        assert_eq!(parse_height(&json!("1000 ft"), "m"), Some(304.8));
+        assert_eq!(parse_height(&json!("120m"), "ft"), Some(120.0));
+        assert_eq!(parse_height(&json!("GND"), "ft"), Some(0.0));
+        assert_eq!(parse_height(&json!("high"), "m"), None);
+        assert_eq!(parse_height(&json!("12 parsecs"), "m"), None);
+        assert_eq!(parse_height(&json!("1e300"), "m"), None);
+    }
+
+    #[test]
+    fn overrides_win_over_properties_which_win_over_defaults() {
+        let mut rules = StyleRules::from_fragment("stroke=%23ffcc00&stroke-width=3").unwrap();
+        rules.defaults.insert("fill".into(), json!("#0000ff"));
+        let mut w = Vec::new();
+        let s = rules.resolve(
+            &props(json!({"stroke": "#000000", "fill": "#00ff00", "fill-opacity": 0.5})),
+            &mut w,
+        );
+        assert_eq!(s.stroke, Rgba([255, 204, 0, 255]));
+        assert_eq!(s.stroke_width_px, 3.0);
+        assert_eq!(s.fill, Rgba([0, 255, 0, 128]));
+        let s = rules.resolve(&Map::new(), &mut w);
+        assert_eq!(s.fill, Rgba([0, 0, 255, 153]));
+        assert!(w.is_empty(), "{w:?}");
+    }
+
+    #[test]
+    fn bad_values_warn_and_fall_back() {
+        let mut w = Vec::new();
+        let s = StyleRules::default().resolve(
+            &props(json!({"stroke": "yellowish", "stroke-width": -4, "fill-opacity": 7})),
+            &mut w,
+        );
+        assert_eq!(s, Style::default());
+        assert_eq!(w.len(), 3, "{w:?}");
+        assert!(StyleRules::from_fragment("strok=1").is_err());
+        assert!(StyleRules::from_fragment("stroke").is_err());
+        assert!(StyleRules::from_fragment("stroke=%zz").is_err());
+    }
+
+    #[test]
+    fn eurocontrol_and_traffic_limits_extrude() {
+        let mut w = Vec::new();
+        let rules = StyleRules::from_fragment("extrude=true").unwrap();
+        let fir = props(json!({"UPPERLIMIT": "195", "UPPERUNIT": "FL",
+            "LOWERLIMIT": "0", "LOWERUNIT": "FT"}));
+        let s = rules.resolve(&fir, &mut w);
+        assert_eq!(s.extrude, Some((0.0, 19_500.0 * FOOT_M)));
+        assert_eq!(s.clamp, Clamp::Absolute);
+        let shape = props(json!({"lower": 0.0, "upper": 65.0, "units": "FL"}));
+        let s = StyleRules::default().resolve(&shape, &mut w);
+        assert_eq!(s.extrude, Some((0.0, 6500.0 * FOOT_M)));
+        assert!(w.is_empty(), "{w:?}");
+        let inverted = props(json!({"lower": "FL100", "upper": "FL50"}));
+        assert_eq!(StyleRules::default().resolve(&inverted, &mut w).extrude, None);
+        assert_eq!(w.len(), 1);
+    }
+}
