@@ -100,6 +100,14 @@ pub struct GlobeArgs {
     /// config file sizes them with cache_mb or gpu_tiles).
     #[arg(long = "memory-mb")]
     pub memory_mb: Option<u64>,
+    /// Vector data to draw: a GeoJSON file (or RFC 8142 sequence, or a `traffic` airspace
+    /// file) with style overrides after '#', e.g.
+    /// 'countries.geojson#stroke=%23ffcc00&stroke-width=2' or 'firs.geojson#extrude=true'
+    /// (keys: stroke, stroke-width, stroke-opacity, fill, fill-opacity, marker-color,
+    /// marker-size, marker-symbol, marker-outline, extrude, lower, upper, units, clamp,
+    /// path). Repeatable.
+    #[arg(long = "vector")]
+    pub vector: Vec<String>,
 }
 
 #[derive(Args)]
@@ -233,6 +241,34 @@ pub enum GeoCommand {
         #[arg(long)]
         level: u8,
     },
+}
+
+/// The vector layer of the `--vector` arguments (`None` without any): every file read,
+/// each bad feature a warning, a file that cannot be read or is not GeoJSON an error.
+pub fn vector_layer(specs: &[String]) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
+    if specs.is_empty() {
+        return Ok(None);
+    }
+    let mut layer = globus_engine::VectorLayer::new();
+    for spec in specs {
+        // A file whose name holds '#' is taken whole when it exists.
+        let (file, fragment) = match spec.rsplit_once('#') {
+            Some((f, frag)) if !Path::new(spec).exists() => (f, frag),
+            _ => (spec.as_str(), ""),
+        };
+        let rules = globus_engine::StyleRules::from_fragment(fragment)
+            .map_err(|e| anyhow::anyhow!("--vector {spec}: {e}"))?;
+        let (loaded, ids) = layer
+            .add_file(Path::new(file), &rules)
+            .with_context(|| format!("--vector {spec}"))?;
+        tracing::info!(
+            "{file}: {} of {} features drawn ({} warnings)",
+            ids.len(),
+            loaded.read,
+            loaded.warning_count
+        );
+    }
+    Ok(Some(layer))
 }
 
 /// The globe the arguments (and their config file) describe. Checks every value the

@@ -6,7 +6,7 @@ use std::time::Duration;
 use std::io::IsTerminal;
 
 use anyhow::Context;
-use globus_engine::{FrameReport, Headless, save_png};
+use globus_engine::{FrameReport, Headless, Overlay, save_png};
 use serde_json::json;
 
 use crate::args::{self, RenderArgs};
@@ -32,12 +32,17 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         args::check_writable(s)?;
     }
+    let mut vectors = args::vector_layer(&a.globe.vector)?;
     let mut off = Headless::new(&builder, width, height)?;
     let timeout = Duration::from_secs_f64(a.timeout_s);
     let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);
     let progress = LoadProgress::new();
     let mut show = |r: &FrameReport| progress.show(r);
-    let mut frame = off.render_complete_reporting(&view, timeout, &mut [], &mut show)?;
+    let mut frame = {
+        let mut overlays: Vec<&mut dyn Overlay> =
+            vectors.iter_mut().map(|v| v as &mut dyn Overlay).collect();
+        off.render_complete_reporting(&view, timeout, &mut overlays, &mut show)?
+    };
     // Above the ground of streamed data: the ground is known once the tiles under the
     // camera have loaded, so place the camera again and finish the picture from there.
     for _ in 0..3 {
@@ -46,7 +51,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             break;
         }
         view = placed;
-        frame = off.render_complete_reporting(&view, timeout, &mut [], &mut show)?;
+        let mut overlays: Vec<&mut dyn Overlay> =
+            vectors.iter_mut().map(|v| v as &mut dyn Overlay).collect();
+        frame = off.render_complete_reporting(&view, timeout, &mut overlays, &mut show)?;
     }
     progress.finish();
     // Tiles that failed for good are drawn over with coarser data: say so, per layer.
@@ -110,6 +117,16 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "camera": {"lon": camera.lon_deg, "lat": camera.lat_deg, "alt_m": altitude,
                         "heading": camera.heading_deg, "pitch": camera.pitch_deg},
             "size": [width, height],
+            "vector": vectors.as_ref().map(|v| {
+                let s = v.stats();
+                json!({
+                    "features": s.features,
+                    "line_instances": s.line_instances,
+                    "fill_vertices": s.fill_vertices,
+                    "draw_calls": s.draw_calls,
+                    "gpu_bytes": s.gpu_bytes,
+                })
+            }),
         });
         let text = serde_json::to_string_pretty(&stats)? + "\n";
         globus_tiling::files::write_atomic(path, text.as_bytes())

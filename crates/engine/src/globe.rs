@@ -517,6 +517,9 @@ impl Globe {
             formats: self.formats,
             ellipsoid: *self.layer.ellipsoid(),
             exaggeration: self.settings.exaggeration,
+            drawn: &self.selection.draw,
+            layer: &self.layer,
+            terrain_depth: targets.terrain_depth_view(),
         };
         for o in overlays.iter_mut() {
             o.prepare(&frame);
@@ -524,6 +527,9 @@ impl Globe {
         {
             let mut pass = begin_pass(encoder, "terrain", colour, targets, Attach::Terrain);
             self.renderer.draw(&mut pass);
+        }
+        if overlays.iter().any(|o| o.wants_terrain_depth()) {
+            targets.copy_terrain_depth(encoder);
         }
         // The id buffer is cleared by the first overlay pass: a frame without overlays never
         // touches it (and picks find no object).

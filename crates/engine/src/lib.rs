@@ -66,15 +66,18 @@ mod headless;
 pub mod memory;
 pub mod overlay;
 mod query;
+pub mod vector;
 
 pub use builder::{DEFAULT_REQUEST_LOOKAHEAD_FRAMES, DEFAULT_SEED, GlobeBuilder, MIN_SSE_PX};
 pub use camera_spec::CameraSpec;
 pub use controller::{CameraController, Ground};
 pub use error::EngineError;
 pub use globe::{FrameReport, Globe, MemoryUse, Pick};
+pub use globus_vector::{Feature, StyleRules};
 pub use headless::{Headless, RenderedFrame, holes_inside, save_png};
 pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};
+pub use vector::{FeatureId, VectorLayer, VectorStats};
 
 pub use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
 pub use globus_render::{

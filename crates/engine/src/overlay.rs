@@ -23,6 +23,9 @@
 
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_render::{FrameCamera, FrameFormats};
+use globus_stream::TerrainLayer;
+use globus_terrain::TileMesh;
+use globus_tiling::{DrawTile, GeoRect, TileKey};
 
 /// One of the passes overlays draw in, in drawing order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -57,6 +60,9 @@ pub struct FrameContext<'a> {
     pub(crate) formats: FrameFormats,
     pub(crate) ellipsoid: Ellipsoid,
     pub(crate) exaggeration: f64,
+    pub(crate) drawn: &'a [DrawTile],
+    pub(crate) layer: &'a TerrainLayer,
+    pub(crate) terrain_depth: &'a wgpu::TextureView,
 }
 
 impl FrameContext<'_> {
@@ -90,6 +96,29 @@ impl FrameContext<'_> {
         self.exaggeration
     }
 
+    /// The terrain tiles drawn this frame.
+    pub fn drawn_tiles(&self) -> &[DrawTile] {
+        self.drawn
+    }
+
+    /// The mesh a loaded tile is drawn with (every drawn tile is loaded): vertices relative
+    /// to its centre, exaggerated, surface triangles first.
+    pub fn tile_mesh(&self, key: TileKey) -> Option<&TileMesh> {
+        self.layer.get(key).map(|d| &d.mesh)
+    }
+
+    /// A loaded tile's rectangle (radians).
+    pub fn tile_rect(&self, key: TileKey) -> Option<GeoRect> {
+        self.layer.get(key).map(|d| d.tile.rect)
+    }
+
+    /// The depth buffer as the terrain pass left it (reversed-Z, `Depth32Float`), to be read
+    /// with `textureLoad` in the world and screen-aligned passes by overlays whose
+    /// [`Overlay::wants_terrain_depth`] is true (it is copied only then).
+    pub fn terrain_depth(&self) -> &wgpu::TextureView {
+        self.terrain_depth
+    }
+
     /// The ECEF point drawn for a geodetic position: its height above the ellipsoid raised
     /// by the exaggeration, as the terrain's is (see [`crate::Globe::world_position`]).
     pub fn world_position(&self, at: Cartographic) -> DVec3 {
@@ -106,6 +135,12 @@ pub trait Overlay {
     /// Called once a frame before any pass is recorded: update buffers for this frame's
     /// camera, create pipelines the first time.
     fn prepare(&mut self, frame: &FrameContext<'_>);
+
+    /// Whether [`FrameContext::terrain_depth`] must hold the terrain's depth this frame
+    /// (costs one depth-buffer copy per frame when any overlay wants it).
+    fn wants_terrain_depth(&self) -> bool {
+        false
+    }
 
     /// Records this overlay's draws for `pass` into `render_pass` (called once per pass in
     /// [`Overlay::passes`], after every overlay was prepared).

@@ -94,7 +94,10 @@ impl FrameFormats {
 
 /// The depth and id buffers of frames of one size.
 pub struct FrameTargets {
+    depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
+    terrain_depth: wgpu::Texture,
+    terrain_depth_view: wgpu::TextureView,
     ids: wgpu::Texture,
     id_view: wgpu::TextureView,
     width: u32,
@@ -226,13 +229,21 @@ impl FrameTargets {
         let depth = texture(
             "frame depth",
             DEPTH_FORMAT,
-            wgpu::TextureUsages::TEXTURE_BINDING,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        let terrain_depth = texture(
+            "terrain depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
         let ids = texture("frame ids", ID_FORMAT, wgpu::TextureUsages::COPY_SRC);
         let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
         Self {
             depth_reader: DepthReader::new(device, &depth_view),
             depth_view,
+            depth,
+            terrain_depth_view: terrain_depth.create_view(&wgpu::TextureViewDescriptor::default()),
+            terrain_depth,
             id_view: ids.create_view(&wgpu::TextureViewDescriptor::default()),
             ids,
             width,
@@ -250,14 +261,34 @@ impl FrameTargets {
         &self.depth_view
     }
 
+    /// A copy of the depth buffer as the terrain pass left it (see
+    /// [`FrameTargets::copy_terrain_depth`]), for overlays that test against the terrain in
+    /// their shaders.
+    pub fn terrain_depth_view(&self) -> &wgpu::TextureView {
+        &self.terrain_depth_view
+    }
+
+    /// Copies the depth buffer into the terrain depth texture.
+    pub fn copy_terrain_depth(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.copy_texture_to_texture(
+            self.depth.as_image_copy(),
+            self.terrain_depth.as_image_copy(),
+            wgpu::Extent3d {
+                width: self.width,
+                height: self.height,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
     /// The id buffer.
     pub fn id_view(&self) -> &wgpu::TextureView {
         &self.id_view
     }
 
-    /// GPU bytes of both buffers.
+    /// GPU bytes of the depth, terrain depth and id buffers.
     pub fn gpu_bytes(&self) -> u64 {
-        u64::from(self.width) * u64::from(self.height) * 8
+        u64::from(self.width) * u64::from(self.height) * 12
     }
 
     /// Reads the id and depth the last frame left at pixel (`x`, `y`), waiting for the GPU.

@@ -199,6 +199,23 @@ impl DrapeSurface {
         }
     }
 
+    /// The point of the surface over (longitude, latitude) in degrees shifted by `shift`,
+    /// relative to the tile's origin, if the tile covers it.
+    pub fn point(&self, lon: f64, lat: f64, shift: f64) -> Option<DVec3> {
+        let q = self.to_uv(lon + shift, lat);
+        if !(0.0..=1.0).contains(&q[0]) || !(0.0..=1.0).contains(&q[1]) {
+            return None;
+        }
+        let (i, j, _, _) = cell_span(q, q);
+        self.cells[j * CELLS + i].iter().copied().find_map(|k| {
+            let tri = self.triangles[k as usize].map(|v| self.uv[v as usize]);
+            let o = cross(tri[0], tri[1], tri[2]).signum();
+            (0..3)
+                .all(|e| cross(tri[e], tri[(e + 1) % 3], q) * o >= -1e-12)
+                .then(|| self.point_in(k, q))
+        })
+    }
+
     /// The 3D point at `q` (u, v) in triangle `k`'s plane.
     fn point_in(&self, k: u32, q: [f64; 2]) -> DVec3 {
         let idx = self.triangles[k as usize];
@@ -342,7 +359,10 @@ mod tests {
                 tris.push([k + 1, k + w as u32 + 1, k + w as u32]);
             }
         }
-        (DrapeSurface::new([10.0, 50.0, 11.0, 51.0], uv, pos, tris), h)
+        (
+            DrapeSurface::new([10.0, 50.0, 11.0, 51.0], uv, pos, tris),
+            h,
+        )
     }
 
     /// The mesh's own height at (u, v): the plane of the triangle holding it.
@@ -403,7 +423,10 @@ mod tests {
             .sum();
         let uv = tri.map(|p| [(p[0] - 10.0) * 1000.0, (51.0 - p[1]) * 1000.0]);
         let expected = cross(uv[0], uv[1], uv[2]).abs() / 2.0;
-        assert!((area - expected).abs() < 1e-6 * expected, "{area} vs {expected}");
+        assert!(
+            (area - expected).abs() < 1e-6 * expected,
+            "{area} vs {expected}"
+        );
         for t in &out {
             let c = (t[0] + t[1] + t[2]) / 3.0;
             assert!((c.z - mesh_height(&s, c.x / 1000.0, c.y / 1000.0)).abs() < 1e-9);
@@ -412,6 +435,14 @@ mod tests {
         out.clear();
         s.drape_triangle([[0.0, 40.0], [40.0, 40.0], [0.0, 80.0]], 0.0, &mut out);
         assert_eq!(out.len(), s.triangle_count());
+    }
+
+    #[test]
+    fn a_draped_point_is_on_the_mesh() {
+        let (s, _) = surface();
+        let p = s.point(10.3, 50.6, 0.0).unwrap();
+        assert!((p.z - mesh_height(&s, 0.3, 0.4)).abs() < 1e-9);
+        assert!(s.point(12.0, 50.6, 0.0).is_none());
     }
 
     #[test]

@@ -169,7 +169,9 @@ mod tests {
 
     #[test]
     fn a_feature_with_nothing_left_is_none() {
-        let f = feature(r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [200, 0]}}"#);
+        let f = feature(
+            r#"{"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [200, 0]}}"#,
+        );
         let mut w = Vec::new();
         assert!(from_geojson(0, f, &StyleRules::default(), &mut w).is_none());
         assert_eq!(w.len(), 1);

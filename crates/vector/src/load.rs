@@ -87,7 +87,9 @@ mod tests {
     use crate::style::Clamp;
 
     fn data(name: &str) -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data").join(name)
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/data")
+            .join(name)
     }
 
     #[test]
@@ -99,13 +101,22 @@ mod tests {
         // a few metres: warned about, drawn all the same.
         let crossing: Vec<usize> = l.warnings.iter().map(|w| w.index).collect();
         assert_eq!(crossing, [4, 14]);
-        assert!(l.warnings.iter().all(|w| w.message.contains("crosses itself")));
+        assert!(
+            l.warnings
+                .iter()
+                .all(|w| w.message.contains("crosses itself"))
+        );
         let antarctica = l
             .features
             .iter()
             .find(|f| f.properties["name"] == "Antarctica")
             .unwrap();
-        assert!(antarctica.polygons.iter().any(|p| p[0].iter().any(|q| q[1] == -90.0)));
+        assert!(
+            antarctica
+                .polygons
+                .iter()
+                .any(|p| p[0].iter().any(|q| q[1] == -90.0))
+        );
     }
 
     #[test]
@@ -115,8 +126,14 @@ mod tests {
         assert_eq!(l.read, 58);
         assert_eq!(l.features.len(), 58, "{:?}", l.warnings);
         for f in &l.features {
-            let (lo, hi) = f.style.extrude.unwrap_or_else(|| panic!("{:?}", f.properties));
-            assert!(lo >= 0.0 && hi > lo && hi <= 999.0 * 100.0 * crate::style::FOOT_M, "{lo} {hi}");
+            let (lo, hi) = f
+                .style
+                .extrude
+                .unwrap_or_else(|| panic!("{:?}", f.properties));
+            assert!(
+                lo >= 0.0 && hi > lo && hi <= 999.0 * 100.0 * crate::style::FOOT_M,
+                "{lo} {hi}"
+            );
             assert_eq!(f.style.clamp, Clamp::Absolute);
         }
     }

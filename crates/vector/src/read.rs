@@ -182,8 +182,8 @@ fn feature_from_value(value: Value) -> RawFeature {
     match value.get("type").and_then(Value::as_str) {
         Some("Feature") => geojson::Feature::try_from(value).map_err(|e| e.to_string()),
         Some(
-            "Point" | "MultiPoint" | "LineString" | "MultiLineString" | "Polygon"
-            | "MultiPolygon" | "GeometryCollection",
+            "Point" | "MultiPoint" | "LineString" | "MultiLineString" | "Polygon" | "MultiPolygon"
+            | "GeometryCollection",
         ) => geojson::Geometry::try_from(value)
             .map(geojson::Feature::from)
             .map_err(|e| e.to_string()),
@@ -388,7 +388,13 @@ mod tests {
             {"type": "Feature", "properties": null, "geometry": {"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}
         ]}"#;
         let (f, s) = read_all(text).unwrap();
-        assert_eq!(s, ReadSummary { features: 4, stopped: None });
+        assert_eq!(
+            s,
+            ReadSummary {
+                features: 4,
+                stopped: None
+            }
+        );
         assert!(f[0].is_ok() && f[3].is_ok());
         assert!(f[1].is_err() && f[2].is_err(), "{f:?}");
     }
@@ -400,7 +406,12 @@ mod tests {
             {"type": "Feature", "geometry": {"type": "Point", "coord"#;
         let (f, s) = read_all(text).unwrap();
         assert_eq!(f.len(), 1);
-        assert!(s.stopped.as_deref().is_some_and(|m| m.contains("after feature 0")), "{s:?}");
+        assert!(
+            s.stopped
+                .as_deref()
+                .is_some_and(|m| m.contains("after feature 0")),
+            "{s:?}"
+        );
     }
 
     #[test]
@@ -409,16 +420,29 @@ mod tests {
         let (f, s) = read_all(seq).unwrap();
         assert_eq!(s.features, 3);
         assert!(f[0].is_ok() && f[1].is_err() && f[2].is_ok());
-        let (f, _) = read_all(br#"{"type": "Polygon", "coordinates": [[[0,0],[1,0],[1,1],[0,0]]]}"#)
-            .unwrap();
+        let (f, _) =
+            read_all(br#"{"type": "Polygon", "coordinates": [[[0,0],[1,0],[1,1],[0,0]]]}"#)
+                .unwrap();
         assert!(f[0].as_ref().is_ok_and(|f| f.geometry.is_some()));
     }
 
     #[test]
     fn what_is_not_geojson_is_one_error() {
-        for text in [&b""[..], b"   ", b"[1, 2]", b"PK\x03\x04zip", b"{\"a\": 1}", b"{\"type\": \"Topology\"}", b"{nope"] {
+        for text in [
+            &b""[..],
+            b"   ",
+            b"[1, 2]",
+            b"PK\x03\x04zip",
+            b"{\"a\": 1}",
+            b"{\"type\": \"Topology\"}",
+            b"{nope",
+        ] {
             let e = read_all(text).err();
-            assert!(matches!(e, Some(ReadError::NotGeoJson { .. })), "{:?}: {e:?}", String::from_utf8_lossy(text));
+            assert!(
+                matches!(e, Some(ReadError::NotGeoJson { .. })),
+                "{:?}: {e:?}",
+                String::from_utf8_lossy(text)
+            );
         }
     }
 
@@ -447,7 +471,8 @@ mod tests {
         text.extend_from_slice(b"[1, 2]]}}]}");
         let e = read_all(&text).err();
         assert!(
-            e.as_ref().is_some_and(|e| e.to_string().contains("larger than 16 MiB")),
+            e.as_ref()
+                .is_some_and(|e| e.to_string().contains("larger than 16 MiB")),
             "{e:?}"
         );
     }

@@ -290,7 +290,9 @@ const POLAR_LIMIT_DEG: f64 = 89.999_999;
 /// Isometric latitude (the Mercator northing on the unit sphere) of a geodetic latitude in
 /// degrees, on an ellipsoid of eccentricity `e`.
 pub fn isometric(lat_deg: f64, e: f64) -> f64 {
-    let phi = lat_deg.clamp(-POLAR_LIMIT_DEG, POLAR_LIMIT_DEG).to_radians();
+    let phi = lat_deg
+        .clamp(-POLAR_LIMIT_DEG, POLAR_LIMIT_DEG)
+        .to_radians();
     phi.tan().asinh() - e * (e * phi.sin()).atanh()
 }
 
@@ -342,6 +344,109 @@ pub fn triangulate(rings: &[Vec<Position>]) -> (Vec<[f64; 2]>, Vec<u32>) {
     (vertices, indices)
 }
 
+/// Triangles of a polygon (as [`triangulate`] takes it) cut into cells of `step_deg` on a
+/// side, so no triangle is larger than a cell: earcut alone makes slivers as long as the
+/// polygon, which sag under the body's curvature at altitude and cross hundreds of terrain
+/// triangles when draped. Each latitude band is clipped from the polygon first, then each
+/// cell from its band (Sutherland-Hodgman per ring; the degenerate seams it leaves along a
+/// cell edge are zero-area and earcut drops them), so the work grows with the ring length
+/// times the bands plus the cells, not their product.
+pub fn tessellate(rings: &[Vec<Position>], step_deg: f64) -> Vec<[[f64; 2]; 3]> {
+    let Some(exterior) = rings.first() else {
+        return Vec::new();
+    };
+    let step = step_deg.max(1e-3);
+    let c0 = exterior.iter().map(|p| p[0]).sum::<f64>() / exterior.len() as f64;
+    // Rings as 2D, holes moved next to their exterior by whole turns.
+    let flat: Vec<Vec<[f64; 2]>> = rings
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let c = r.iter().map(|p| p[0]).sum::<f64>() / r.len() as f64;
+            let shift = if k == 0 {
+                0.0
+            } else {
+                ((c - c0) / 360.0).round() * 360.0
+            };
+            r.iter().map(|p| [p[0] - shift, p[1]]).collect()
+        })
+        .collect();
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &flat[0] {
+        for d in 0..2 {
+            lo[d] = lo[d].min(p[d]);
+            hi[d] = hi[d].max(p[d]);
+        }
+    }
+    let mut out = Vec::new();
+    let mut earcut = earcut::Earcut::new();
+    let mut indices: Vec<u32> = Vec::new();
+    let rows = ((hi[1] - lo[1]) / step).ceil().max(1.0) as usize;
+    let cols = ((hi[0] - lo[0]) / step).ceil().max(1.0) as usize;
+    for row in 0..rows {
+        let (s, n) = (lo[1] + row as f64 * step, lo[1] + (row + 1) as f64 * step);
+        let band: Vec<Vec<[f64; 2]>> = flat
+            .iter()
+            .map(|r| clip_ring(&clip_ring(r, 1, s, true), 1, n, false))
+            .collect();
+        if band[0].len() < 3 {
+            continue;
+        }
+        for col in 0..cols {
+            let (w, e) = (lo[0] + col as f64 * step, lo[0] + (col + 1) as f64 * step);
+            let mut vertices: Vec<[f64; 2]> = Vec::new();
+            let mut holes: Vec<u32> = Vec::new();
+            for (k, r) in band.iter().enumerate() {
+                let cell = clip_ring(&clip_ring(r, 0, w, true), 0, e, false);
+                if cell.len() < 3 {
+                    if k == 0 {
+                        break;
+                    }
+                    continue;
+                }
+                if k > 0 {
+                    holes.push(vertices.len() as u32);
+                }
+                vertices.extend(cell);
+            }
+            if vertices.len() < 3 {
+                continue;
+            }
+            earcut.earcut(vertices.iter().copied(), &holes, &mut indices);
+            for t in indices.chunks_exact(3) {
+                let [a, b, c] = [t[0], t[1], t[2]].map(|i| vertices[i as usize]);
+                let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+                if area > 0.0 {
+                    out.push([a, b, c]);
+                } else if area < 0.0 {
+                    out.push([a, c, b]);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The part of a ring on one side of the line `axis = at` (`above`: the side of greater
+/// values), Sutherland-Hodgman.
+fn clip_ring(ring: &[[f64; 2]], axis: usize, at: f64, above: bool) -> Vec<[f64; 2]> {
+    let n = ring.len();
+    let mut out = Vec::with_capacity(n + 4);
+    let inside = |p: [f64; 2]| if above { p[axis] >= at } else { p[axis] <= at };
+    for i in 0..n {
+        let (p, q) = (ring[i], ring[(i + 1) % n]);
+        let (ip, iq) = (inside(p), inside(q));
+        if ip {
+            out.push(p);
+        }
+        if ip != iq {
+            let t = (at - p[axis]) / (q[axis] - p[axis]);
+            out.push([p[0] + (q[0] - p[0]) * t, p[1] + (q[1] - p[1]) * t]);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -377,15 +482,26 @@ mod tests {
 
     #[test]
     fn a_ring_over_the_antimeridian_is_one_polygon() {
-        let r = ring(&ring_of(&[[179.0, 0.0], [-179.0, 0.0], [-179.0, 1.0], [179.0, 1.0], [179.0, 0.0]]))
-            .unwrap();
-        assert_eq!(r.iter().map(|p| p[0]).collect::<Vec<_>>(), [179.0, 181.0, 181.0, 179.0]);
+        let r = ring(&ring_of(&[
+            [179.0, 0.0],
+            [-179.0, 0.0],
+            [-179.0, 1.0],
+            [179.0, 1.0],
+            [179.0, 0.0],
+        ]))
+        .unwrap();
+        assert_eq!(
+            r.iter().map(|p| p[0]).collect::<Vec<_>>(),
+            [179.0, 181.0, 181.0, 179.0]
+        );
         assert!((signed_area(&r) - 2.0).abs() < 1e-9);
     }
 
     #[test]
     fn a_ring_around_the_pole_covers_the_cap() {
-        let coords: Vec<Vec<f64>> = (0..=8).map(|k| vec![-180.0 + 45.0 * f64::from(k % 8), 80.0]).collect();
+        let coords: Vec<Vec<f64>> = (0..=8)
+            .map(|k| vec![-180.0 + 45.0 * f64::from(k % 8), 80.0])
+            .collect();
         let r = ring(&coords).unwrap();
         // Nine points along 80 N (the last a turn from the first), then the pole twice.
         assert_eq!(r.len(), 11);
@@ -404,8 +520,22 @@ mod tests {
 
     #[test]
     fn holes_are_cut_out() {
-        let outer = ring(&ring_of(&[[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0], [0.0, 0.0]])).unwrap();
-        let hole = ring(&ring_of(&[[1.0, 1.0], [1.0, 3.0], [3.0, 3.0], [3.0, 1.0], [1.0, 1.0]])).unwrap();
+        let outer = ring(&ring_of(&[
+            [0.0, 0.0],
+            [4.0, 0.0],
+            [4.0, 4.0],
+            [0.0, 4.0],
+            [0.0, 0.0],
+        ]))
+        .unwrap();
+        let hole = ring(&ring_of(&[
+            [1.0, 1.0],
+            [1.0, 3.0],
+            [3.0, 3.0],
+            [3.0, 1.0],
+            [1.0, 1.0],
+        ]))
+        .unwrap();
         let (v, i) = triangulate(&[outer, hole]);
         let area: f64 = i
             .chunks_exact(3)
@@ -415,6 +545,54 @@ mod tests {
             })
             .sum();
         assert!((area - 12.0).abs() < 1e-9, "{area}");
+    }
+
+    fn area(tris: &[[[f64; 2]; 3]]) -> f64 {
+        tris.iter()
+            .map(|[a, b, c]| ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2.0)
+            .sum()
+    }
+
+    #[test]
+    fn tessellated_polygons_keep_their_area_in_small_triangles() {
+        // A concave L with a hole, 10 x 10 degrees.
+        let outer = ring(&ring_of(&[
+            [0.0, 0.0],
+            [10.0, 0.0],
+            [10.0, 4.0],
+            [4.0, 4.0],
+            [4.0, 10.0],
+            [0.0, 10.0],
+            [0.0, 0.0],
+        ]))
+        .unwrap();
+        let hole = ring(&ring_of(&[
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [2.0, 2.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+        ]))
+        .unwrap();
+        let tris = tessellate(&[outer, hole], 1.0);
+        assert!(
+            (area(&tris) - (40.0 + 24.0 - 1.0)).abs() < 1e-9,
+            "{}",
+            area(&tris)
+        );
+        for t in &tris {
+            for d in 0..2 {
+                let (lo, hi) = t
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |m, p| (m.0.min(p[d]), m.1.max(p[d])));
+                assert!(hi - lo <= 1.0 + 1e-9);
+            }
+        }
+        // Over the antimeridian and round the pole, as triangulate.
+        let coords: Vec<Vec<f64>> = (0..=8)
+            .map(|k| vec![-180.0 + 45.0 * f64::from(k % 8), 80.0])
+            .collect();
+        assert!((area(&tessellate(&[ring(&coords).unwrap()], 2.0)) - 3600.0).abs() < 1e-6);
     }
 
     #[test]
@@ -439,6 +617,10 @@ mod tests {
         // Over the antimeridian, longitudes stay continuous.
         let pts = [[179.0, 10.0, 0.0], [181.0, 10.0, 0.0]];
         let d = densify(&e, &pts, false, PathKind::Geodesic, Straight::LonLat, 1.0);
-        assert!(d.windows(2).all(|w| w[1][0] > w[0][0] && w[1][0] - w[0][0] < 2.0), "{d:?}");
+        assert!(
+            d.windows(2)
+                .all(|w| w[1][0] > w[0][0] && w[1][0] - w[0][0] < 2.0),
+            "{d:?}"
+        );
     }
 }

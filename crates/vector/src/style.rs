@@ -139,9 +139,7 @@ pub fn parse_height(value: &Value, default_unit: &str) -> Option<f64> {
             if let Some(rest) = upper.strip_prefix("FL") {
                 (rest.trim().parse::<f64>().ok()?, "FL".to_owned())
             } else {
-                let split = s
-                    .find(|c: char| c.is_ascii_alphabetic())
-                    .unwrap_or(s.len());
+                let split = s.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(s.len());
                 let (n, u) = s.split_at(split);
                 let unit = if u.is_empty() { default_unit } else { u.trim() };
                 (n.trim().parse::<f64>().ok()?, unit.to_owned())
@@ -398,7 +396,10 @@ mod tests {
     fn colours_parse_as_simplestyle_writes_them() {
         assert_eq!(Rgba::parse("#ffcc00"), Some(Rgba([255, 204, 0, 255])));
         assert_eq!(Rgba::parse("f00"), Some(Rgba([255, 0, 0, 255])));
-        assert_eq!(Rgba::parse("#11223380"), Some(Rgba([0x11, 0x22, 0x33, 0x80])));
+        assert_eq!(
+            Rgba::parse("#11223380"),
+            Some(Rgba([0x11, 0x22, 0x33, 0x80]))
+        );
         assert_eq!(Rgba::parse("#ff"), None);
         assert_eq!(Rgba::parse("#gg0000"), None);
     }
@@ -460,7 +461,10 @@ mod tests {
         assert_eq!(s.extrude, Some((0.0, 6500.0 * FOOT_M)));
         assert!(w.is_empty(), "{w:?}");
         let inverted = props(json!({"lower": "FL100", "upper": "FL50"}));
-        assert_eq!(StyleRules::default().resolve(&inverted, &mut w).extrude, None);
+        assert_eq!(
+            StyleRules::default().resolve(&inverted, &mut w).extrude,
+            None
+        );
         assert_eq!(w.len(), 1);
     }
 }

@@ -1,0 +1,398 @@
+//! [`VectorLayer`]: the engine's built-in overlay for points, lines, polygons and extruded
+//! volumes from GeoJSON or from code, draped on the terrain or at altitude.
+//!
+//! * Draped geometry (`clamp` ground, the default) is cut along the triangles of every drawn
+//!   tile's own mesh ([`globus_vector::drape`], where the choice of technique is argued), so
+//!   it lies exactly on the terrain drawn this frame at whatever level; each tile's pieces
+//!   are computed once when it is first drawn and kept while it stays cached. Fills are
+//!   tested a hair nearer than their depth (they share the terrain's planes); lines and
+//!   points are screen-space capsules whose visibility is decided at their centre line
+//!   against the terrain's depth ([`crate::FrameContext::terrain_depth`]), so a line keeps its
+//!   full pixel width at any pitch and is hidden only by terrain genuinely in front.
+//! * Geometry at altitude (absolute heights, extruded volumes) is built once in ECEF f64,
+//!   split into chunks of at most 100 km, each with its own origin: f32 holds offsets only.
+//! * Per frame, when nothing changed, the CPU writes the anchors' offsets from the eye (one
+//!   per drawn tile and chunk) and the uniforms: nothing else. When the drawn tiles or the
+//!   features change, the instance buffers are rebuilt from the kept pieces.
+//! * Everything is drawn in two draw calls: fills (draped, then volumes' faces), then lines
+//!   and points.
+//!
+//! Picking: every feature writes its pick id (see [`VectorLayer::pick_id`]) into the id
+//! buffer; [`VectorLayer::feature_for_pick`] maps a [`crate::Pick::object`] back to it.
+
+mod build;
+mod gpu;
+
+use std::path::Path;
+use std::time::Instant;
+
+use globus_geo::{DVec3, Ellipsoid};
+use globus_tiling::TileKey;
+use globus_vector::{Feature, Loaded, ReadError, StyleRules};
+use rustc_hash::FxHashMap;
+
+use crate::overlay::{FrameContext, Overlay, OverlayPass};
+use build::{Bbox, Built, TileDrape};
+use gpu::{FillVertex, Gpu, LineInstance};
+
+pub use gpu::SHADER;
+
+/// A feature's id in its layer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct FeatureId(pub u32);
+
+/// Draped pieces of tiles kept beyond those drawn.
+const KEPT_TILES: usize = 2048;
+
+/// What the layer holds and what its last frame did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VectorStats {
+    /// Features held.
+    pub features: usize,
+    /// Line segments and point symbols drawn.
+    pub line_instances: u32,
+    /// Fill vertices drawn.
+    pub fill_vertices: u32,
+    /// Draw calls of the last frame.
+    pub draw_calls: u32,
+    /// GPU bytes of its buffers.
+    pub gpu_bytes: u64,
+    /// Tiles whose draped pieces the last frame computed.
+    pub tiles_draped: u32,
+    /// Features (re)built the last frame.
+    pub features_built: u32,
+    /// Whether the last frame rebuilt the instance buffers.
+    pub rebuilt: bool,
+    /// CPU seconds the last frame's prepare took.
+    pub prepare_s: f64,
+}
+
+struct Entry {
+    feature: Feature,
+    built: Option<Built>,
+}
+
+/// Points, lines, polygons and volumes over the globe. See the module documentation.
+pub struct VectorLayer {
+    pick_base: u32,
+    next_id: u32,
+    entries: FxHashMap<u32, Entry>,
+    pending: Vec<u32>,
+    invalid: Vec<Bbox>,
+    built_for: Option<(Ellipsoid, f64)>,
+    tiles: FxHashMap<TileKey, CachedTile>,
+    frame: u64,
+    last_drawn: Vec<TileKey>,
+    geometry_changed: bool,
+    gpu: Option<Gpu>,
+    anchors: Vec<DVec3>,
+    stats: VectorStats,
+}
+
+impl Default for VectorLayer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl VectorLayer {
+    /// An empty layer whose features write pick ids from 1 up.
+    pub fn new() -> Self {
+        Self::with_pick_base(1)
+    }
+
+    /// An empty layer whose features write pick ids from `base` up (to share the id buffer
+    /// with other overlays).
+    pub fn with_pick_base(base: u32) -> Self {
+        Self {
+            pick_base: base.max(1),
+            next_id: 0,
+            entries: FxHashMap::default(),
+            pending: Vec::new(),
+            invalid: Vec::new(),
+            built_for: None,
+            tiles: FxHashMap::default(),
+            frame: 0,
+            last_drawn: Vec::new(),
+            geometry_changed: false,
+            gpu: None,
+            anchors: Vec::new(),
+            stats: VectorStats::default(),
+        }
+    }
+
+    /// Reads a GeoJSON file (or sequence, or airspace) styled by `rules` and adds its
+    /// features; bad features are warned about (see [`Loaded::warnings`]) and left out.
+    pub fn add_file(
+        &mut self,
+        path: &Path,
+        rules: &StyleRules,
+    ) -> Result<(Loaded, Vec<FeatureId>), ReadError> {
+        let mut loaded = globus_vector::load_file(path, rules)?;
+        let ids = self.add_batch(std::mem::take(&mut loaded.features));
+        Ok((loaded, ids))
+    }
+
+    /// Adds features; their ids in order.
+    pub fn add_batch(&mut self, features: impl IntoIterator<Item = Feature>) -> Vec<FeatureId> {
+        features.into_iter().map(|f| self.add(f)).collect()
+    }
+
+    /// Adds a feature.
+    pub fn add(&mut self, feature: Feature) -> FeatureId {
+        let id = self.next_id;
+        self.next_id += 1;
+        self.entries.insert(
+            id,
+            Entry {
+                feature,
+                built: None,
+            },
+        );
+        self.pending.push(id);
+        FeatureId(id)
+    }
+
+    /// Replaces a feature; false if there is none with this id.
+    pub fn update(&mut self, id: FeatureId, feature: Feature) -> bool {
+        let Some(e) = self.entries.get_mut(&id.0) else {
+            return false;
+        };
+        if let Some(b) = e.built.take() {
+            self.invalid.extend(b.bbox);
+            self.geometry_changed |= !b.chunks.is_empty();
+        }
+        e.feature = feature;
+        self.pending.push(id.0);
+        true
+    }
+
+    /// Removes a feature; false if there is none with this id.
+    pub fn remove(&mut self, id: FeatureId) -> bool {
+        let Some(e) = self.entries.remove(&id.0) else {
+            return false;
+        };
+        if let Some(b) = e.built {
+            self.invalid.extend(b.bbox);
+            self.geometry_changed |= !b.chunks.is_empty();
+        }
+        true
+    }
+
+    /// A feature.
+    pub fn feature(&self, id: FeatureId) -> Option<&Feature> {
+        self.entries.get(&id.0).map(|e| &e.feature)
+    }
+
+    /// Features held.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether it holds no feature.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// The id a feature writes into the id buffer.
+    pub fn pick_id(&self, id: FeatureId) -> u32 {
+        self.pick_base.saturating_add(id.0)
+    }
+
+    /// The feature that wrote `object` into the id buffer, if it is one of this layer's.
+    pub fn feature_for_pick(&self, object: u32) -> Option<(FeatureId, &Feature)> {
+        let id = object.checked_sub(self.pick_base)?;
+        self.entries.get(&id).map(|e| (FeatureId(id), &e.feature))
+    }
+
+    /// What the layer holds and what its last frame did.
+    pub fn stats(&self) -> VectorStats {
+        self.stats
+    }
+
+    /// Builds pending features; invalidates the draped pieces of tiles they touch.
+    fn build_pending(&mut self, ellipsoid: &Ellipsoid, exaggeration: f64) -> u32 {
+        if self.built_for != Some((*ellipsoid, exaggeration)) {
+            self.built_for = Some((*ellipsoid, exaggeration));
+            self.pending = self.entries.keys().copied().collect();
+            self.pending.sort_unstable();
+            for e in self.entries.values_mut() {
+                e.built = None;
+            }
+            self.tiles.clear();
+            self.geometry_changed = true;
+        }
+        let mut built = 0;
+        for id in std::mem::take(&mut self.pending) {
+            let pick = self.pick_base.saturating_add(id);
+            let Some(e) = self.entries.get_mut(&id) else {
+                continue;
+            };
+            if e.built.is_some() {
+                continue;
+            }
+            let b = build::build(&e.feature, pick, ellipsoid, exaggeration);
+            self.invalid.extend(b.bbox);
+            self.geometry_changed |= !b.chunks.is_empty();
+            e.built = Some(b);
+            built += 1;
+        }
+        if !self.invalid.is_empty() {
+            let invalid = std::mem::take(&mut self.invalid);
+            self.tiles
+                .retain(|_, t| !invalid.iter().any(|b| b.overlaps(t.rect)));
+        }
+        built
+    }
+
+    /// Drapes every drawn tile that has no pieces yet; whether any was draped.
+    fn drape_drawn(&mut self, frame: &FrameContext<'_>) -> u32 {
+        let mut draped = 0;
+        for d in frame.drawn_tiles() {
+            if let Some(t) = self.tiles.get_mut(&d.key) {
+                t.last_used = self.frame;
+                continue;
+            }
+            let (Some(mesh), Some(rect)) = (frame.tile_mesh(d.key), frame.tile_rect(d.key)) else {
+                continue;
+            };
+            let rect = rect.to_degrees();
+            let surface = build::surface(mesh, rect);
+            let mut drape = TileDrape::default();
+            for (&id, e) in &self.entries {
+                let Some(b) = &e.built else {
+                    continue;
+                };
+                if b.bbox.is_some_and(|bb| bb.overlaps(rect)) {
+                    drape.add(&surface, self.pick_base.saturating_add(id), &b.draped);
+                }
+            }
+            self.tiles.insert(
+                d.key,
+                CachedTile {
+                    drape,
+                    rect,
+                    origin: mesh.centre,
+                    last_used: self.frame,
+                },
+            );
+            draped += 1;
+        }
+        if self.tiles.len() > KEPT_TILES + frame.drawn_tiles().len() {
+            let mut ages: Vec<u64> = self.tiles.values().map(|t| t.last_used).collect();
+            ages.sort_unstable();
+            let cut = ages[ages.len() - KEPT_TILES];
+            let now = self.frame;
+            self.tiles
+                .retain(|_, t| t.last_used >= cut || t.last_used == now);
+        }
+        draped
+    }
+
+    /// Rebuilds the instance arrays from the drawn tiles' pieces and the chunks.
+    fn rebuild(&mut self, frame: &FrameContext<'_>) {
+        self.anchors.clear();
+        let mut lines: Vec<LineInstance> = Vec::new();
+        let mut fills: Vec<FillVertex> = Vec::new();
+        let mut points: Vec<LineInstance> = Vec::new();
+        for d in frame.drawn_tiles() {
+            let Some(t) = self.tiles.get(&d.key) else {
+                continue;
+            };
+            if t.drape.is_empty() {
+                continue;
+            }
+            let anchor = self.anchors.len() as u32;
+            self.anchors.push(t.origin);
+            lines.extend(t.drape.lines.iter().map(|l| LineInstance { anchor, ..*l }));
+            points.extend(t.drape.points.iter().map(|l| LineInstance { anchor, ..*l }));
+            fills.extend(t.drape.fills.iter().map(|f| FillVertex {
+                anchor: f.anchor | anchor,
+                ..*f
+            }));
+        }
+        let mut ids: Vec<u32> = self.entries.keys().copied().collect();
+        ids.sort_unstable();
+        for id in ids {
+            let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref()) else {
+                continue;
+            };
+            for c in &b.chunks {
+                let anchor = self.anchors.len() as u32;
+                self.anchors.push(c.origin);
+                lines.extend(c.lines.iter().map(|l| LineInstance { anchor, ..*l }));
+                fills.extend(c.fills.iter().map(|f| FillVertex {
+                    anchor: f.anchor | anchor,
+                    ..*f
+                }));
+            }
+        }
+        lines.extend(points);
+        if let Some(gpu) = &mut self.gpu {
+            gpu.upload(frame, &lines, &fills);
+        }
+    }
+}
+
+/// A drawn tile's draped pieces.
+struct CachedTile {
+    drape: TileDrape,
+    rect: [f64; 4],
+    origin: DVec3,
+    last_used: u64,
+}
+
+impl Overlay for VectorLayer {
+    fn passes(&self) -> &[OverlayPass] {
+        &[OverlayPass::World]
+    }
+
+    fn wants_terrain_depth(&self) -> bool {
+        !self.entries.is_empty()
+    }
+
+    fn prepare(&mut self, frame: &FrameContext<'_>) {
+        let started = Instant::now();
+        self.frame += 1;
+        if self.gpu.is_none() {
+            self.gpu = Some(Gpu::new(frame));
+        }
+        let built = self.build_pending(frame.ellipsoid(), frame.exaggeration());
+        let draped = self.drape_drawn(frame);
+        let drawn_changed = frame.drawn_tiles().len() != self.last_drawn.len()
+            || frame
+                .drawn_tiles()
+                .iter()
+                .zip(&self.last_drawn)
+                .any(|(d, k)| d.key != *k);
+        let rebuild = drawn_changed || draped > 0 || built > 0 || self.geometry_changed;
+        if rebuild {
+            self.last_drawn.clear();
+            self.last_drawn
+                .extend(frame.drawn_tiles().iter().map(|d| d.key));
+            self.geometry_changed = false;
+            self.rebuild(frame);
+        }
+        let anchors = std::mem::take(&mut self.anchors);
+        if let Some(gpu) = &mut self.gpu {
+            gpu.frame(frame, &anchors);
+            self.stats.line_instances = gpu.line_count;
+            self.stats.fill_vertices = gpu.fill_vertices;
+            self.stats.gpu_bytes = gpu.bytes();
+            self.stats.draw_calls =
+                u32::from(gpu.fill_vertices > 0) + u32::from(gpu.line_count > 0);
+        }
+        self.anchors = anchors;
+        self.stats.features = self.entries.len();
+        self.stats.tiles_draped = draped;
+        self.stats.features_built = built;
+        self.stats.rebuilt = rebuild;
+        self.stats.prepare_s = started.elapsed().as_secs_f64();
+    }
+
+    fn draw(&self, _: OverlayPass, _: &FrameContext<'_>, pass: &mut wgpu::RenderPass<'_>) {
+        if let Some(gpu) = &self.gpu {
+            gpu.draw(pass);
+        }
+    }
+}

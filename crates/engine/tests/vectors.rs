@@ -1,0 +1,395 @@
+//! The vector overlay on lavapipe, pictures compared with what the CPU expects: a draped line
+//! over the real SRTM relief of N57E011 at five altitudes and a low pitch (colour along its
+//! projected centre line, width within 1 px); the countries file from orbit against an
+//! even-odd point-in-polygon of the file's own coordinates (Fiji and Russia across the
+//! antimeridian, Antarctica round the pole); picking a feature; bad files.
+
+mod common;
+
+use std::path::Path;
+use std::time::Duration;
+
+use globus_engine::{
+    CameraSpec, Cartographic, DVec3, GlobeBuilder, Headless, RgbaImage, SourceSpec, StyleRules,
+    VectorLayer, View, save_png,
+};
+use globus_tiler::{ElevationEncoding, JobKind, TileJob};
+
+const TIMEOUT: Duration = Duration::from_secs(300);
+
+fn write_geojson(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write geojson");
+    path
+}
+
+fn pixel(img: &RgbaImage, x: i64, y: i64) -> Option<[f64; 3]> {
+    if x < 0 || y < 0 || x >= i64::from(img.width) || y >= i64::from(img.height) {
+        return None;
+    }
+    let p = img.get(x as u32, y as u32);
+    Some([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+}
+
+/// How much of `colour` a pixel carries over the same pixel of `background` (0..1).
+fn coverage(img: &RgbaImage, bg: &RgbaImage, x: i64, y: i64, colour: [f64; 3]) -> f64 {
+    let (Some(p), Some(b)) = (pixel(img, x, y), pixel(bg, x, y)) else {
+        return 0.0;
+    };
+    let d = |a: [f64; 3], c: [f64; 3]| {
+        ((a[0] - c[0]).powi(2) + (a[1] - c[1]).powi(2) + (a[2] - c[2]).powi(2)).sqrt()
+    };
+    let full = d(colour, b);
+    if full < 60.0 {
+        return f64::NAN; // the background is too close to the colour to tell
+    }
+    // Projection of (p - b) on (colour - b).
+    let dot: f64 = (0..3).map(|k| (p[k] - b[k]) * (colour[k] - b[k])).sum();
+    (dot / (full * full)).clamp(0.0, 1.0)
+}
+
+fn srtm_builder() -> GlobeBuilder {
+    let dir = common::scratch("vectors", "srtm");
+    let job = TileJob {
+        threads: Some(2),
+        ..TileJob::new(
+            JobKind::Dem {
+                encoding: ElevationEncoding::Terrarium,
+                height_scale: None,
+            },
+            vec![globus_test_support::shared_data("N57E011.hgt")],
+            dir.join("srtm"),
+        )
+    };
+    globus_tiler::run(&job).expect("tiling N57E011");
+    let mut builder = GlobeBuilder::new();
+    builder
+        .terrain(SourceSpec::parse(dir.join("srtm").to_str().expect("utf-8")).expect("spec"))
+        .max_level(0);
+    builder
+}
+
+const MAGENTA: [f64; 3] = [255.0, 0.0, 255.0];
+const LINE_PX: f64 = 4.0;
+const LINE_LAT: f64 = 57.45;
+
+/// Renders `view` with and without `layer`; saves both.
+fn with_and_without(
+    off: &mut Headless,
+    view: &View,
+    layer: &mut VectorLayer,
+    name: &str,
+) -> (RgbaImage, RgbaImage) {
+    let frame = off.render_complete(view, TIMEOUT, &mut []).expect("render");
+    assert!(frame.complete, "{name}: tiles still loading");
+    let plain = frame.image;
+    let drawn = off
+        .render_complete(view, TIMEOUT, &mut [layer])
+        .expect("render")
+        .image;
+    let dir = globus_test_support::output_dir("vectors");
+    save_png(&drawn, &dir.join(format!("{name}.png"))).expect("save");
+    (drawn, plain)
+}
+
+#[test]
+fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
+    let builder = srtm_builder();
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the pyramid");
+    let dir = common::scratch("vectors", "line");
+    let file = write_geojson(
+        &dir,
+        "line.geojson",
+        &format!(
+            r##"{{"type": "FeatureCollection", "features": [{{"type": "Feature",
+                "properties": {{"stroke": "#ff00ff", "stroke-width": {LINE_PX}, "path": "rhumb"}},
+                "geometry": {{"type": "LineString", "coordinates": [[11.05, {LINE_LAT}], [11.95, {LINE_LAT}]]}}}}]}}"##
+        ),
+    );
+    let mut layer = VectorLayer::new();
+    layer
+        .add_file(&file, &StyleRules::default())
+        .expect("line file");
+    // Straight down at five altitudes above the ground, then low over the line looking along
+    // a hillside at it.
+    let views = [
+        (11.5, LINE_LAT, 100_000.0, 0.0, -90.0),
+        (11.5, LINE_LAT, 10_000.0, 0.0, -90.0),
+        (11.5, LINE_LAT, 1_000.0, 30.0, -90.0),
+        (11.5, LINE_LAT, 200.0, 0.0, -90.0),
+        (11.5, LINE_LAT, 50.0, 0.0, -90.0),
+        (11.47, LINE_LAT - 0.012, 120.0, 20.0, -12.0),
+    ];
+    for (k, &(lon, lat, alt, heading, pitch)) in views.iter().enumerate() {
+        let cam = common::camera(lon, lat, alt, heading, pitch, true);
+        let mut view = cam.view(off.globe(), 60.0, w, h);
+        off.render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
+        view = cam.view(off.globe(), 60.0, w, h); // placed over the loaded ground
+        let name = format!("line_{k}_{alt}m_pitch{pitch}");
+        let (img, bg) = with_and_without(&mut off, &view, &mut layer, &name);
+        let globe = off.globe();
+        let camera = *globe.camera().expect("a frame camera");
+        let eye = view.position;
+        let (mut expected, mut hit, mut widths) = (0usize, 0usize, Vec::new());
+        // Samples along the part of the line the view can hold.
+        let reach = if pitch > -45.0 { alt * 30.0 } else { alt * 2.0 };
+        let span = (reach / (111_320.0 * LINE_LAT.to_radians().cos())).min(0.45);
+        let (from, to) = ((lon - span).max(11.05), (lon + span).min(11.95));
+        for s in 0..=4000 {
+            let lon = from + (to - from) * f64::from(s) / 4000.0;
+            let (lon_r, lat_r) = (lon.to_radians(), LINE_LAT.to_radians());
+            let at = globe.world_position(Cartographic::new(
+                lon_r,
+                lat_r,
+                globe.ground_height_m(lon_r, lat_r),
+            ));
+            let Some(px) = camera.project(at) else {
+                continue;
+            };
+            let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
+            if x < 3 || y < 3 || x >= i64::from(w) - 3 || y >= i64::from(h) - 3 {
+                continue;
+            }
+            // Terrain in front of the line there (a hill between it and the eye) hides it.
+            let hidden = globe
+                .ray_pick(eye, (at - eye).normalize())
+                .is_some_and(|p| (p - eye).length() < (at - eye).length() * 0.99 - 1.0);
+            if hidden {
+                continue;
+            }
+            let c = coverage(&img, &bg, x, y, MAGENTA);
+            if c.is_nan() {
+                continue;
+            }
+            expected += 1;
+            hit += usize::from(c > 0.5);
+            // Width across the line: summed coverage along the pixel column (the line runs
+            // east-west, so across the screen), corrected for its slope there.
+            if s % 40 == 0 {
+                let next = globe.world_position(Cartographic::new(
+                    (lon + 0.0005).to_radians(),
+                    lat_r,
+                    globe.ground_height_m((lon + 0.0005).to_radians(), lat_r),
+                ));
+                let Some(q) = camera.project(next) else {
+                    continue;
+                };
+                let d = (q - px).normalize_or_zero();
+                if d.x.abs() < 0.5 {
+                    continue;
+                }
+                let sum: f64 = (-12..=12)
+                    .map(|dy| coverage(&img, &bg, x, y + dy, MAGENTA))
+                    .filter(|c| c.is_finite())
+                    .sum();
+                widths.push(sum * d.x.abs());
+            }
+        }
+        assert!(
+            expected > 100,
+            "{name}: only {expected} centre-line pixels in view"
+        );
+        let share = hit as f64 / expected as f64;
+        widths.sort_by(f64::total_cmp);
+        let median = widths.get(widths.len() / 2).copied().unwrap_or(f64::NAN);
+        eprintln!(
+            "{name}: {hit}/{expected} centre pixels magenta ({:.1} %), median width {median:.2} px over {} columns",
+            share * 100.0,
+            widths.len()
+        );
+        assert!(
+            share >= 0.98,
+            "{name}: {:.1} % of the centre line carries the colour",
+            share * 100.0
+        );
+        assert!(
+            (median - LINE_PX).abs() <= 1.0,
+            "{name}: width {median:.2} px, asked {LINE_PX}"
+        );
+    }
+}
+
+/// Even-odd point-in-polygon on the file's own coordinates (no unwrapping: Natural Earth
+/// splits its polygons at the antimeridian and draws Antarctica along -90).
+fn inside_any(polys: &[Vec<Vec<[f64; 2]>>], lon: f64, lat: f64) -> bool {
+    polys.iter().any(|rings| {
+        let mut inside = false;
+        for ring in rings {
+            let n = ring.len();
+            for i in 0..n {
+                let (a, b) = (ring[i], ring[(i + 1) % n]);
+                if (a[1] > lat) != (b[1] > lat) {
+                    let x = a[0] + (lat - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+                    if lon < x {
+                        inside = !inside;
+                    }
+                }
+            }
+        }
+        inside
+    })
+}
+
+fn country_polygons() -> Vec<Vec<Vec<[f64; 2]>>> {
+    let text = std::fs::read_to_string(globus_test_support::shared_data("countries-110m.geojson"))
+        .expect("countries");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("json");
+    let mut out = Vec::new();
+    let ring = |r: &serde_json::Value| -> Vec<[f64; 2]> {
+        r.as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|p| Some([p[0].as_f64()?, p[1].as_f64()?]))
+            .collect()
+    };
+    for f in json["features"].as_array().expect("features") {
+        let g = &f["geometry"];
+        let polys: Vec<&serde_json::Value> = match g["type"].as_str() {
+            Some("Polygon") => vec![&g["coordinates"]],
+            _ => g["coordinates"]
+                .as_array()
+                .expect("multipolygon")
+                .iter()
+                .collect(),
+        };
+        for p in polys {
+            out.push(p.as_array().expect("rings").iter().map(ring).collect());
+        }
+    }
+    out
+}
+
+#[test]
+fn the_countries_from_orbit_cover_what_a_cpu_point_in_polygon_covers() {
+    let (w, h) = (400u32, 400u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let mut layer = VectorLayer::new();
+    let rules =
+        StyleRules::from_fragment("fill=%2300ff00&fill-opacity=1&stroke-width=0").expect("rules");
+    let (loaded, ids) = layer
+        .add_file(
+            &globus_test_support::shared_data("countries-110m.geojson"),
+            &rules,
+        )
+        .expect("countries");
+    assert_eq!((loaded.read, ids.len()), (177, 177));
+    let polys = country_polygons();
+    // Europe and Africa; Russia, Fiji and the antimeridian; Antarctica round the south pole.
+    let views = [
+        ("europe", 15.0, 30.0, 12_000_000.0),
+        ("antimeridian", 178.0, 10.0, 12_000_000.0),
+        ("russia_east", 175.0, 62.0, 8_000_000.0),
+        ("south_pole", 0.0, -89.9, 12_000_000.0),
+    ];
+    for (name, lon, lat, alt) in views {
+        let cam = common::camera(lon, lat, alt, 0.0, -90.0, false);
+        let view = cam.view(off.globe(), 60.0, w, h);
+        let (img, bg) = with_and_without(&mut off, &view, &mut layer, &format!("countries_{name}"));
+        let globe = off.globe();
+        let e = globe.ellipsoid();
+        let mut expected = vec![None; (w * h) as usize];
+        for y in 0..h {
+            for x in 0..w {
+                let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+                let Some(hit) = globe
+                    .ray_pick(view.position, dir)
+                    .or_else(|| e.ray_hit(view.position, dir))
+                else {
+                    continue;
+                };
+                let Some(c) = e.ecef_to_cartographic(hit) else {
+                    continue;
+                };
+                expected[(y * w + x) as usize] = Some(inside_any(&polys, c.lon_deg(), c.lat_deg()));
+            }
+        }
+        let at = |x: i64, y: i64| -> Option<bool> {
+            if x < 0 || y < 0 || x >= i64::from(w) || y >= i64::from(h) {
+                return None;
+            }
+            expected[(y as u32 * w + x as u32) as usize]
+        };
+        let (mut checked, mut wrong, mut land) = (0usize, 0usize, 0usize);
+        for y in 0..i64::from(h) {
+            for x in 0..i64::from(w) {
+                let Some(want) = at(x, y) else { continue };
+                // Within 1 px of a border either answer is right.
+                let border = (-1..=1)
+                    .any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy).is_some_and(|o| o != want)));
+                if border {
+                    continue;
+                }
+                let c = coverage(&img, &bg, x, y, [0.0, 255.0, 0.0]);
+                if c.is_nan() {
+                    continue;
+                }
+                checked += 1;
+                land += usize::from(want);
+                if (c > 0.5) != want {
+                    wrong += 1;
+                }
+            }
+        }
+        let share = wrong as f64 / checked.max(1) as f64;
+        eprintln!(
+            "countries {name}: {wrong} of {checked} pixels differ ({:.3} %), {land} inside",
+            share * 100.0
+        );
+        assert!(
+            checked > 20_000 && land > 1_000,
+            "{name}: {checked} checked, {land} inside"
+        );
+        assert!(
+            share < 0.002,
+            "{name}: {wrong} of {checked} pixels differ from the CPU reference"
+        );
+    }
+}
+
+#[test]
+fn clicking_a_feature_returns_its_id_and_properties() {
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let mut layer = VectorLayer::with_pick_base(1000);
+    layer
+        .add_file(
+            &globus_test_support::shared_data("countries-110m.geojson"),
+            &StyleRules::default(),
+        )
+        .expect("countries");
+    let cam = CameraSpec {
+        lon_deg: 2.5,
+        lat_deg: 46.5,
+        alt_m: 3_000_000.0,
+        heading_deg: 0.0,
+        pitch_deg: -90.0,
+        above_ground: false,
+    };
+    let view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [&mut layer])
+        .expect("render");
+    let globe = off.globe();
+    let pick = globe
+        .pick(160.0, 120.0)
+        .expect("pick")
+        .expect("inside the frame");
+    let object = pick.object().expect("France is under the centre");
+    let (_, feature) = layer.feature_for_pick(object).expect("one of the layer's");
+    assert_eq!(feature.properties["name"], "France");
+    let _ = DVec3::ZERO;
+}
+
+#[test]
+fn a_file_that_is_not_geojson_is_one_error_naming_it() {
+    let dir = common::scratch("vectors", "bad");
+    let csv = write_geojson(&dir, "airports.geojson", "icao,lat,lon\nEGLL,51.4,-0.4\n");
+    let mut layer = VectorLayer::new();
+    let e = layer.add_file(&csv, &StyleRules::default()).unwrap_err();
+    assert!(
+        e.to_string().contains("airports.geojson") && e.to_string().contains("not GeoJSON"),
+        "{e}"
+    );
+    assert!(layer.is_empty());
+}
