@@ -16,7 +16,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
-use globus_engine::{CameraController, CameraSpec, Globe, GlobeBuilder, GpuContext, View};
+use globus_engine::{
+    CameraController, CameraSpec, Globe, GlobeBuilder, GpuContext, VectorLayer, View,
+};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, MouseScrollDelta, WindowEvent};
@@ -39,6 +41,8 @@ pub struct ViewerOptions {
     pub height: u32,
     /// Close the window after this long (for automated checks).
     pub exit_after: Option<Duration>,
+    /// `--vector` arguments (see [`crate::args::vector_layer`]).
+    pub vectors: Vec<String>,
 }
 
 /// Seconds a fly-to takes.
@@ -59,7 +63,9 @@ pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
     })?;
     // Sources first: one that cannot be opened fails before a window opens.
     options.globe.open_sources()?;
+    let vectors = crate::args::vector_layer(&options.vectors)?;
     let mut app = App {
+        vectors,
         options,
         state: None,
         error: None,
@@ -76,6 +82,7 @@ pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
 
 struct App {
     options: ViewerOptions,
+    vectors: Option<VectorLayer>,
     state: Option<State>,
     error: Option<anyhow::Error>,
     started: Instant,
@@ -103,6 +110,9 @@ struct State {
     keys: HashSet<KeyCode>,
     last_tick: Instant,
     fps: FpsCounter,
+    vectors: Option<VectorLayer>,
+    /// Where the left button went down (a release close to it is a click).
+    pressed_at: Option<PhysicalPosition<f64>>,
 }
 
 struct FpsCounter {
@@ -117,8 +127,9 @@ impl ApplicationHandler for App {
             return;
         }
         match State::new(event_loop, &self.options) {
-            Ok(s) => {
+            Ok(mut s) => {
                 s.window.request_redraw();
+                s.vectors = self.vectors.take();
                 self.state = Some(s);
             }
             Err(e) => {
@@ -257,6 +268,8 @@ impl State {
                 since: Instant::now(),
                 fps: 0.0,
             },
+            vectors: None,
+            pressed_at: None,
         })
     }
 
@@ -319,10 +332,19 @@ impl State {
         let (x, y) = (self.cursor.x, self.cursor.y);
         let orbit_key = self.modifiers.control_key();
         if !pressed {
+            if button == MouseButton::Left
+                && let Some(at) = self.pressed_at.take()
+                && (at.x - x).hypot(at.y - y) < 3.0
+            {
+                self.click(x, y);
+            }
             self.controller.end_pan();
             self.controller.end_orbit();
             self.drag = None;
             return;
+        }
+        if button == MouseButton::Left {
+            self.pressed_at = Some(self.cursor);
         }
         self.drag = match button {
             MouseButton::Left if orbit_key => self
@@ -340,6 +362,36 @@ impl State {
             MouseButton::Right => Some(Drag::Look(self.cursor)),
             _ => self.drag,
         };
+    }
+
+    /// A click: prints the picked vector feature's properties (one JSON line), or the
+    /// ground position.
+    fn click(&mut self, x: f64, y: f64) {
+        let pick = match self.globe.pick(x, y) {
+            Ok(Some(p)) => p,
+            Ok(None) => return,
+            Err(e) => {
+                tracing::warn!("picking failed: {e}");
+                return;
+            }
+        };
+        let ground = pick
+            .surface()
+            .and_then(|p| self.globe.cartographic(p))
+            .map(|c| [c.lon_deg(), c.lat_deg(), c.height_m]);
+        let feature = pick
+            .object()
+            .and_then(|o| self.vectors.as_ref()?.feature_for_pick(o));
+        let line = match feature {
+            Some((id, f)) => serde_json::json!({
+                "feature": id.0,
+                "index": f.index,
+                "properties": f.properties,
+                "ground": ground,
+            }),
+            None => serde_json::json!({ "ground": ground }),
+        };
+        println!("{line}");
     }
 
     fn cursor_moved(&mut self, position: PhysicalPosition<f64>) {
@@ -405,7 +457,10 @@ impl State {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        self.globe.render(&mut encoder, &target, &mut []);
+        match self.vectors.as_mut() {
+            Some(v) => self.globe.render(&mut encoder, &target, &mut [v]),
+            None => self.globe.render(&mut encoder, &target, &mut []),
+        }
         self.gpu.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
         self.gpu.queue.present(frame);

@@ -393,3 +393,79 @@ fn a_file_that_is_not_geojson_is_one_error_naming_it() {
     );
     assert!(layer.is_empty());
 }
+
+fn point_feature(index: usize, lon: f64, lat: f64, colour: &str) -> globus_engine::Feature {
+    let text = format!(
+        r##"{{"type": "Feature", "properties": {{"marker-color": "{colour}", "marker-size": 6, "clamp": "absolute"}},
+            "geometry": {{"type": "Point", "coordinates": [{lon}, {lat}, 20000]}}}}"##
+    );
+    let f: geojson::Feature = text.parse().expect("feature");
+    let mut w = Vec::new();
+    globus_vector::from_geojson(index, f, &StyleRules::default(), &mut w).expect("drawable")
+}
+
+#[test]
+fn updates_cost_what_changed_and_an_unchanged_frame_rebuilds_nothing() {
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let mut layer = VectorLayer::new();
+    let ids = layer.add_batch((0..100).map(|k| {
+        point_feature(
+            k,
+            7.0 + f64::from(k as u32 % 10) * 0.1,
+            46.0 + f64::from(k as u32 / 10) * 0.1,
+            "#ff0000",
+        )
+    }));
+    let cam = common::camera(7.45, 46.45, 300_000.0, 0.0, -90.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [&mut layer])
+        .expect("render");
+    let frame = |off: &mut Headless, layer: &mut VectorLayer| {
+        off.update(&view);
+        off.draw_and_read(&mut [layer]).expect("draw")
+    };
+    frame(&mut off, &mut layer);
+    let idle = layer.stats();
+    assert_eq!(
+        (idle.features_built, idle.rebuilt, idle.tiles_draped),
+        (0, false, 0),
+        "{idle:?}"
+    );
+    assert_eq!(idle.line_instances, 100);
+    assert!(idle.draw_calls <= 2);
+    // Recolour one point: one feature is built again, and the picture shows it.
+    let target = ids[55];
+    let camera = *off.globe().camera().expect("camera");
+    let at = off.globe().world_position(Cartographic::new(
+        7.5f64.to_radians(),
+        46.5f64.to_radians(),
+        20_000.0,
+    ));
+    let px = camera.project(at).expect("in view");
+    let before = frame(&mut off, &mut layer);
+    assert!(layer.update(target, point_feature(55, 7.5, 46.5, "#0000ff")));
+    let after = frame(&mut off, &mut layer);
+    assert_eq!(layer.stats().features_built, 1);
+    let (x, y) = (px.x as u32, px.y as u32);
+    assert!(
+        before.get(x, y)[0] > 200 && before.get(x, y)[2] < 60,
+        "{:?}",
+        before.get(x, y)
+    );
+    assert!(
+        after.get(x, y)[2] > 200 && after.get(x, y)[0] < 60,
+        "{:?}",
+        after.get(x, y)
+    );
+    // Remove it: 99 left, the pixel shows the ground again.
+    assert!(layer.remove(target));
+    assert!(!layer.remove(target));
+    let gone = frame(&mut off, &mut layer);
+    assert_eq!(layer.stats().line_instances, 99);
+    assert!(
+        gone.get(x, y)[2] < 200 || gone.get(x, y)[0] > 60,
+        "{:?}",
+        gone.get(x, y)
+    );
+}

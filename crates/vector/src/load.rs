@@ -92,6 +92,52 @@ mod tests {
             .join(name)
     }
 
+    /// Mutated GeoJSON, sequences and airspaces: read, checked, styled, densified,
+    /// tessellated and draped without a panic.
+    #[test]
+    fn fuzz_geojson() {
+        use crate::shape::{self, Straight};
+        let ellipsoid = globus_geo::Ellipsoid::WGS84;
+        let surface = crate::DrapeSurface::new(
+            [-10.0, -10.0, 10.0, 10.0],
+            vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]],
+            vec![
+                globus_geo::DVec3::ZERO,
+                globus_geo::DVec3::X,
+                globus_geo::DVec3::Y,
+            ],
+            vec![[0, 1, 2]],
+        );
+        let r = globus_test_support::fuzz::run("geojson", |b| {
+            let mut any = false;
+            let _ = crate::read::read(Path::new("fuzz.geojson"), b, &mut |i, raw| {
+                let Ok(f) = raw else { return };
+                let mut w = Vec::new();
+                let Some(f) = crate::from_geojson(i, f, &StyleRules::default(), &mut w) else {
+                    return;
+                };
+                any = true;
+                for l in &f.lines {
+                    let d =
+                        shape::densify(&ellipsoid, l, false, f.style.path, Straight::Chord, 1000.0);
+                    let pts: Vec<[f64; 2]> = d.iter().map(|p| [p[0], p[1]]).collect();
+                    surface.drape_line(&pts, 0.0, &mut Vec::new());
+                }
+                for p in &f.polygons {
+                    for t in shape::tessellate(p, 5.0).into_iter().take(1000) {
+                        surface.drape_triangle(t, 0.0, &mut Vec::new());
+                    }
+                }
+            });
+            any
+        });
+        eprintln!("{r:?}");
+        assert!(
+            r.cases > 0 && r.accepted > 0 && r.accepted < r.cases,
+            "{r:?}"
+        );
+    }
+
     #[test]
     fn every_country_loads_without_a_warning() {
         let l = load_file(&data("countries-110m.geojson"), &StyleRules::default()).unwrap();

@@ -138,7 +138,7 @@ pub fn signed_area(ring: &[Position]) -> f64 {
 /// over the edges' longitude spans; rings of more than 100,000 edges are not checked.
 pub fn self_intersects(ring: &[Position]) -> bool {
     let n = ring.len();
-    if n < 4 || n > 100_000 {
+    if !(4..=100_000).contains(&n) {
         return false;
     }
     let edge = |i: usize| (ring[i], ring[(i + 1) % n]);
@@ -224,6 +224,17 @@ impl Curve<'_> {
         let Some(mid) = self.midpoint(a, b) else {
             return;
         };
+        if 90.0 - mid[1].abs() < 1e-7 {
+            // Through a pole: up a's meridian and down b's, which are straight in any
+            // drawing; the pole is two vertices, one per longitude.
+            let pole = 90f64.copysign(mid[1]);
+            let (pa, pb) = ([a[0], pole, mid[2]], [b[0], pole, mid[2]]);
+            self.split(a, pa, depth + 1, out);
+            out.push(pa);
+            out.push(pb);
+            self.split(pb, b, depth + 1, out);
+            return;
+        }
         let drawn = self.drawn_midpoint(a, b);
         let truth = self.ecef(mid);
         if (drawn - truth).length() <= self.tolerance_m {

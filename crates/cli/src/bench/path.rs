@@ -58,6 +58,8 @@ pub fn run(
     let text =
         globus_tiling::files::read_text_capped(path_file, globus_tiling::files::MAX_TEXT_BYTES)
             .with_context(|| format!("cannot read {}", path_file.display()))?;
+    let mut vectors = args::vector_layer(&a.globe.vector)?;
+    let mut vector_samples: Vec<(f64, bool, u32)> = Vec::new();
     let mut off = Headless::new(builder, width, height)?;
     let fov = a.globe.fov_deg;
     let origin = path_file.display().to_string();
@@ -116,7 +118,14 @@ pub fn run(
         let view = camera_at(&path, t).view(off.globe(), fov, width, height);
         let started = Instant::now();
         let r = off.update(&view);
-        off.draw(&mut []);
+        match vectors.as_mut() {
+            Some(v) => {
+                off.draw(&mut [v]);
+                let s = v.stats();
+                vector_samples.push((s.prepare_s * 1e6, s.rebuilt, s.draw_calls));
+            }
+            None => off.draw(&mut []),
+        }
         samples.push(FrameSample::new(&r, started.elapsed().as_secs_f64() * 1e3));
         deferred += u64::from(r.requests_deferred);
     }
@@ -188,8 +197,74 @@ pub fn run(
             map.insert(k.into(), v);
         }
     }
+    if let Some(v) = vectors.as_mut() {
+        let report = vector_report(
+            &mut off,
+            v,
+            &vector_samples,
+            &camera_at(&path, path.duration()),
+            fov,
+        );
+        if let Some(map) = summary.as_object_mut() {
+            map.insert("vector".into(), report);
+        }
+    }
     println!("{summary}");
     Ok(())
+}
+
+/// Vector costs: CPU of frames where nothing changed and of those that rebuilt, draw calls,
+/// GPU bytes, and the CPU of the frame after 1,000 features are replaced (at the path's last
+/// camera).
+fn vector_report(
+    off: &mut Headless,
+    layer: &mut globus_engine::VectorLayer,
+    samples: &[(f64, bool, u32)],
+    last: &CameraSpec,
+    fov: f64,
+) -> serde_json::Value {
+    let (w, h) = (off.size().0, off.size().1);
+    let view = last.view(off.globe(), fov, w, h);
+    // Two frames on the same view: the second changes nothing.
+    for _ in 0..2 {
+        off.update(&view);
+        off.draw(&mut [layer]);
+    }
+    let idle = layer.stats();
+    let n = layer.len();
+    let ids: Vec<_> = (0..n as u32)
+        .map(globus_engine::FeatureId)
+        .filter(|&id| layer.feature(id).is_some())
+        .cycle()
+        .take(1000)
+        .collect();
+    let started = Instant::now();
+    let mut updated = 0;
+    for &id in &ids {
+        if let Some(f) = layer.feature(id).cloned() {
+            updated += usize::from(layer.update(id, f));
+        }
+    }
+    let update_calls_us = started.elapsed().as_secs_f64() * 1e6;
+    off.update(&view);
+    off.draw(&mut [layer]);
+    let after = layer.stats();
+    let quiet: Vec<f64> = samples.iter().filter(|s| !s.1).map(|s| s.0).collect();
+    let rebuilt: Vec<f64> = samples.iter().filter(|s| s.1).map(|s| s.0).collect();
+    json!({
+        "features": idle.features,
+        "prepare_us_unchanged_frames": quantiles(quiet),
+        "prepare_us_rebuilding_frames": quantiles(rebuilt),
+        "prepare_us_idle_frame": idle.prepare_s * 1e6,
+        "draw_calls": samples.iter().map(|s| s.2).max().unwrap_or(idle.draw_calls),
+        "gpu_bytes": idle.gpu_bytes,
+        "line_instances": idle.line_instances,
+        "fill_vertices": idle.fill_vertices,
+        "updated_features": updated,
+        "update_calls_us": update_calls_us,
+        "prepare_us_after_update": after.prepare_s * 1e6,
+        "features_rebuilt_after_update": after.features_built,
+    })
 }
 
 /// The path's camera at time `t` (altitude above the ellipsoid).

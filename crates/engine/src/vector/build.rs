@@ -13,8 +13,10 @@ use super::gpu::{FillVertex, LineInstance};
 pub(crate) const PATH_TOLERANCE_M: f64 = 1.0;
 
 /// Longest side of a chunk of geometry at altitude sharing one origin: f32 offsets within
-/// it resolve about a centimetre.
-const CHUNK_EXTENT_M: f64 = 100_000.0;
+/// it resolve 6 cm at worst (invisible on geometry at altitude, which is never nearer than
+/// its own size allows), and a continent's routes need a few hundred anchors, each one
+/// subtraction per frame.
+const CHUNK_EXTENT_M: f64 = 1_000_000.0;
 
 /// Largest step, degrees, between vertices of a fill or volume cap at altitude (so its
 /// triangles follow the curvature of the body: the chord of 0.5 degree sags about 60 m).
@@ -31,9 +33,36 @@ const MARKER_OUTLINE_PX: f32 = 1.5;
 /// Geometry draped on the terrain, in unwrapped longitude/latitude degrees.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Draped {
-    pub lines: Vec<(Vec<[f64; 2]>, Bbox, Rgba, f32)>,
-    pub fills: Vec<(Vec<[[f64; 2]; 3]>, Bbox, Rgba)>,
-    pub points: Vec<([f64; 2], Rgba, Rgba, f32, bool)>,
+    pub lines: Vec<DrapedLine>,
+    pub fills: Vec<DrapedFill>,
+    pub points: Vec<DrapedPoint>,
+}
+
+/// A line to drape: its densified positions, bounds, colour and width in pixels.
+#[derive(Clone, Debug)]
+pub(crate) struct DrapedLine {
+    pub pts: Vec<[f64; 2]>,
+    pub bbox: Bbox,
+    pub colour: Rgba,
+    pub width_px: f32,
+}
+
+/// A fill to drape: its tessellated triangles, bounds and colour.
+#[derive(Clone, Debug)]
+pub(crate) struct DrapedFill {
+    pub triangles: Vec<[[f64; 2]; 3]>,
+    pub bbox: Bbox,
+    pub colour: Rgba,
+}
+
+/// A point symbol on the ground.
+#[derive(Clone, Debug)]
+pub(crate) struct DrapedPoint {
+    pub at: [f64; 2],
+    pub colour: Rgba,
+    pub outline: Rgba,
+    pub size_px: f32,
+    pub square: bool,
 }
 
 /// Longitude/latitude bounds, degrees (longitudes unwrapped).
@@ -121,9 +150,12 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
             );
             let pts = lonlat(&d);
             let b = Bbox::of(pts.iter().copied());
-            out.draped
-                .lines
-                .push((pts, b, style.stroke, style.stroke_width_px));
+            out.draped.lines.push(DrapedLine {
+                pts,
+                bbox: b,
+                colour: style.stroke,
+                width_px: style.stroke_width_px,
+            });
         } else {
             let d = shape::densify(
                 ellipsoid,
@@ -168,7 +200,11 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
             if ground {
                 let tris = shape::tessellate(&rings, DRAPED_CELL_DEG);
                 let b = Bbox::of(tris.iter().flatten().copied());
-                out.draped.fills.push((tris, b, style.fill));
+                out.draped.fills.push(DrapedFill {
+                    triangles: tris,
+                    bbox: b,
+                    colour: style.fill,
+                });
             } else {
                 let h = polygon[0][0][2];
                 cap(&rings, h, style.fill, id, &world, &mut chunks);
@@ -181,9 +217,12 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
                 if ground {
                     let pts = lonlat(&pts);
                     let b = Bbox::of(pts.iter().copied());
-                    out.draped
-                        .lines
-                        .push((pts, b, style.stroke, style.stroke_width_px));
+                    out.draped.lines.push(DrapedLine {
+                        pts,
+                        bbox: b,
+                        colour: style.stroke,
+                        width_px: style.stroke_width_px,
+                    });
                 } else {
                     let d = shape::densify(
                         ellipsoid,
@@ -206,9 +245,13 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
             style.marker_size_px,
         );
         if ground {
-            out.draped
-                .points
-                .push(([p[0], p[1]], colour, outline, size, style.marker_square));
+            out.draped.points.push(DrapedPoint {
+                at: [p[0], p[1]],
+                colour,
+                outline,
+                size_px: size,
+                square: style.marker_square,
+            });
         } else {
             chunks.point(world(p), id, colour, outline, size, style.marker_square);
         }
@@ -217,9 +260,9 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
     out.bbox = d
         .lines
         .iter()
-        .map(|l| l.1)
-        .chain(d.fills.iter().map(|f| f.1))
-        .chain(d.points.iter().map(|p| Bbox::of(std::iter::once(p.0))))
+        .map(|l| l.bbox)
+        .chain(d.fills.iter().map(|f| f.bbox))
+        .chain(d.points.iter().map(|p| Bbox::of(std::iter::once(p.at))))
         .reduce(Bbox::union);
     out.chunks = chunks.finish();
     out
@@ -274,7 +317,12 @@ fn volume(
             let mut pts: Vec<[f64; 2]> = r.iter().map(|p| [p[0], p[1]]).collect();
             pts.push([r[0][0], r[0][1]]);
             let b = Bbox::of(pts.iter().copied());
-            draped.lines.push((pts, b, edge, width));
+            draped.lines.push(DrapedLine {
+                pts,
+                bbox: b,
+                colour: edge,
+                width_px: width,
+            });
         }
     }
     let world = |p: Position| at(p, p[2]);
@@ -411,26 +459,27 @@ impl TileDrape {
     pub(crate) fn add(&mut self, surface: &DrapeSurface, id: u32, d: &Draped) {
         let rect = surface.rect_deg();
         let mut segs = Vec::new();
-        for (pts, b, colour, width) in &d.lines {
-            if !b.overlaps(rect) {
+        for l in &d.lines {
+            if !l.bbox.overlaps(rect) {
                 continue;
             }
-            for shift in surface.shifts(b.lon[0], b.lon[1]) {
+            for shift in surface.shifts(l.bbox.lon[0], l.bbox.lon[1]) {
                 segs.clear();
-                surface.drape_line(pts, shift, &mut segs);
+                surface.drape_line(&l.pts, shift, &mut segs);
                 self.lines.extend(
                     segs.iter()
-                        .map(|s| LineInstance::segment(s[0], s[1], id, *colour, *width)),
+                        .map(|s| LineInstance::segment(s[0], s[1], id, l.colour, l.width_px)),
                 );
             }
         }
         let mut tris = Vec::new();
-        for (triangles, b, colour) in &d.fills {
-            if !b.overlaps(rect) {
+        for f in &d.fills {
+            if !f.bbox.overlaps(rect) {
                 continue;
             }
-            for shift in surface.shifts(b.lon[0], b.lon[1]) {
-                for t in triangles {
+            let colour = f.colour;
+            for shift in surface.shifts(f.bbox.lon[0], f.bbox.lon[1]) {
+                for t in &f.triangles {
                     let tb = Bbox::of(t.iter().map(|p| [p[0] + shift, p[1]]));
                     if !tb.overlaps(rect) {
                         continue;
@@ -439,23 +488,24 @@ impl TileDrape {
                     surface.drape_triangle(*t, shift, &mut tris);
                     for tri in &tris {
                         for &p in tri {
-                            self.fills.push(FillVertex::new(p, 0, *colour, id, true));
+                            self.fills.push(FillVertex::new(p, 0, colour, id, true));
                         }
                     }
                 }
             }
         }
-        for &(p, colour, outline, size, square) in &d.points {
-            for shift in surface.shifts(p[0], p[0]) {
-                if let Some(at) = surface.point(p[0], p[1], shift) {
+        for p in &d.points {
+            let [lon, lat] = p.at;
+            for shift in surface.shifts(lon, lon) {
+                if let Some(at) = surface.point(lon, lat, shift) {
                     self.points.push(LineInstance::point(
                         at,
                         id,
-                        colour,
-                        outline,
-                        size,
+                        p.colour,
+                        p.outline,
+                        p.size_px,
                         MARKER_OUTLINE_PX,
-                        square,
+                        p.square,
                     ));
                 }
             }
