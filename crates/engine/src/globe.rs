@@ -531,6 +531,9 @@ impl Globe {
         if overlays.iter().any(|o| o.wants_terrain_depth()) {
             targets.copy_terrain_depth(encoder);
         }
+        for o in overlays.iter_mut() {
+            o.record(&frame, encoder);
+        }
         // The id buffer is cleared by the first overlay pass: a frame without overlays never
         // touches it (and picks find no object).
         let draws_in = |p: OverlayPass| overlays.iter().any(|o| o.passes().contains(&p));

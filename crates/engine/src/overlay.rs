@@ -142,6 +142,13 @@ pub trait Overlay {
         false
     }
 
+    /// Records passes of the overlay's own into `encoder`, after the terrain pass and before
+    /// the world pass (e.g. order-independent transparency into targets of its own, with
+    /// [`FrameContext::terrain_depth`] attached read-only as their depth). Nothing by default.
+    fn record(&mut self, frame: &FrameContext<'_>, encoder: &mut wgpu::CommandEncoder) {
+        let _ = (frame, encoder);
+    }
+
     /// Records this overlay's draws for `pass` into `render_pass` (called once per pass in
     /// [`Overlay::passes`], after every overlay was prepared).
     fn draw(

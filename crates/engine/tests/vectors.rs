@@ -469,3 +469,138 @@ fn updates_cost_what_changed_and_an_unchanged_frame_rebuilds_nothing() {
         gone.get(x, y)
     );
 }
+
+fn box_feature(
+    index: usize,
+    lon: f64,
+    lat: f64,
+    half_deg: f64,
+    lower: f64,
+    upper: f64,
+    fill: &str,
+) -> globus_engine::Feature {
+    let (w, e, s, n) = (
+        lon - half_deg,
+        lon + half_deg,
+        lat - half_deg,
+        lat + half_deg,
+    );
+    let text = format!(
+        r##"{{"type": "Feature", "properties": {{"fill": "{fill}", "fill-opacity": 0.4, "stroke-width": 0,
+            "extrude": true, "lower": {lower}, "upper": {upper}}},
+            "geometry": {{"type": "Polygon", "coordinates": [[[{w}, {s}], [{e}, {s}], [{e}, {n}], [{w}, {n}], [{w}, {s}]]]}}}}"##
+    );
+    let f: geojson::Feature = text.parse().expect("feature");
+    let mut warnings = Vec::new();
+    globus_vector::from_geojson(index, f, &StyleRules::default(), &mut warnings).expect("drawable")
+}
+
+fn mean_abs_diff(a: &RgbaImage, b: &RgbaImage) -> f64 {
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(x, y)| f64::from(x.abs_diff(*y)))
+        .sum::<f64>()
+        / a.pixels.len() as f64
+}
+
+#[test]
+fn translucent_volumes_composite_in_any_order_hide_behind_terrain_and_show_from_inside() {
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    // Two overlapping boxes seen from the side and above: red nearer, blue behind.
+    let red = || box_feature(0, 10.0, 0.0, 0.5, 20_000.0, 60_000.0, "#ff0000");
+    let blue = || box_feature(1, 10.0, 0.6, 0.5, 20_000.0, 60_000.0, "#0000ff");
+    let cam = common::camera(10.0, -1.6, 80_000.0, 0.0, -25.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    let plain = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let mut red_first = VectorLayer::new();
+    red_first.add_batch([red(), blue()]);
+    let mut blue_first = VectorLayer::new();
+    blue_first.add_batch([blue(), red()]);
+    let a = off
+        .render_complete(&view, TIMEOUT, &mut [&mut red_first])
+        .expect("render")
+        .image;
+    let b = off
+        .render_complete(&view, TIMEOUT, &mut [&mut blue_first])
+        .expect("render")
+        .image;
+    let dir = globus_test_support::output_dir("vectors");
+    save_png(&a, &dir.join("volumes_red_first.png")).expect("save");
+    save_png(&b, &dir.join("volumes_blue_first.png")).expect("save");
+    let order = mean_abs_diff(&a, &b);
+    let shown = mean_abs_diff(&a, &plain);
+    eprintln!("volumes: order changes {order:.3} levels on average, the volumes {shown:.2}");
+    assert!(
+        shown > 5.0,
+        "the volumes change the picture by {shown:.2} levels only"
+    );
+    assert!(
+        order < 0.5,
+        "drawing order changes the picture by {order:.3} levels"
+    );
+    // Where both cover a pixel both tint it: it differs from each drawn alone.
+    let mut alone = |f: globus_engine::Feature| {
+        let mut l = VectorLayer::new();
+        l.add(f);
+        off.render_complete(&view, TIMEOUT, &mut [&mut l])
+            .expect("render")
+            .image
+    };
+    let (red_only, blue_only) = (alone(red()), alone(blue()));
+    let differs = |p: [u8; 4], q: [u8; 4]| (0..3).any(|k| p[k].abs_diff(q[k]) > 12);
+    let both = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let p = a.get(x, y);
+            differs(p, red_only.get(x, y))
+                && differs(p, blue_only.get(x, y))
+                && differs(p, plain.get(x, y))
+        })
+        .count();
+    assert!(both > 500, "only {both} pixels tinted by both volumes");
+    // A volume wholly under the ground (below any sea floor) is hidden by it.
+    let mut buried = VectorLayer::new();
+    buried.add(box_feature(
+        0, 10.0, 0.0, 0.5, -30_000.0, -20_000.0, "#ff0000",
+    ));
+    let under = off
+        .render_complete(&view, TIMEOUT, &mut [&mut buried])
+        .expect("render")
+        .image;
+    let hidden = mean_abs_diff(&under, &plain);
+    assert!(
+        hidden < 0.05,
+        "a buried volume shows through the terrain: {hidden:.3} levels"
+    );
+    // From inside a volume, everything is seen through its walls.
+    let inside = common::camera(10.0, 0.0, 40_000.0, 90.0, -5.0, false);
+    let view = inside.view(off.globe(), 60.0, w, h);
+    let plain = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let tinted = off
+        .render_complete(&view, TIMEOUT, &mut [&mut red_first])
+        .expect("render")
+        .image;
+    save_png(&tinted, &dir.join("volumes_inside.png")).expect("save");
+    let changed = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let (p, q) = (tinted.get(x, y), plain.get(x, y));
+            (0..3).any(|k| p[k].abs_diff(q[k]) > 20)
+        })
+        .count();
+    let share = changed as f64 / f64::from(w * h);
+    eprintln!("inside a volume: {:.1} % of pixels tinted", share * 100.0);
+    assert!(
+        share > 0.95,
+        "from inside the red volume only {:.1} % of the frame is tinted",
+        share * 100.0
+    );
+}

@@ -44,6 +44,19 @@ impl RangeAllocator {
         Some(start..start + len)
     }
 
+    /// Raises the capacity to `capacity` (never lowers it): the new units are free.
+    pub fn grow(&mut self, capacity: u32) {
+        if capacity <= self.capacity {
+            return;
+        }
+        let added = self.capacity..capacity;
+        match self.free.last_mut() {
+            Some(last) if last.end == added.start => last.end = added.end,
+            _ => self.free.push(added),
+        }
+        self.capacity = capacity;
+    }
+
     /// Returns a range from [`RangeAllocator::allocate`].
     pub fn free(&mut self, range: Range<u32>) {
         if range.is_empty() {
@@ -97,6 +110,23 @@ impl RangeAllocator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn growing_adds_free_room_at_the_end() {
+        let mut a = RangeAllocator::new(10);
+        assert_eq!(a.allocate(8), Some(0..8));
+        assert_eq!(a.allocate(5), None);
+        a.grow(20);
+        assert_eq!(a.allocate(5), Some(8..13));
+        assert_eq!(a.allocate(7), Some(13..20));
+        assert_eq!(a.allocate(1), None);
+        a.grow(5);
+        assert_eq!(a.capacity(), 20);
+        let mut b = RangeAllocator::new(4);
+        assert_eq!(b.allocate(4), Some(0..4));
+        b.grow(6);
+        assert_eq!(b.allocate(2), Some(4..6));
+    }
 
     #[test]
     fn first_fit_and_merging() {

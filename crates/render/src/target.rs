@@ -234,7 +234,9 @@ impl FrameTargets {
         let terrain_depth = texture(
             "terrain depth",
             DEPTH_FORMAT,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         let ids = texture("frame ids", ID_FORMAT, wgpu::TextureUsages::COPY_SRC);
         let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());

@@ -186,6 +186,7 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
         if let Some((lower, upper)) = style.extrude {
             volume(
                 &rings,
+                polygon,
                 (lower, upper),
                 style,
                 id,
@@ -274,6 +275,7 @@ pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggerat
 #[allow(clippy::too_many_arguments)]
 fn volume(
     rings: &[Vec<Position>],
+    corners: &[Vec<Position>],
     (lower, upper): (f64, f64),
     style: &globus_vector::Style,
     id: u32,
@@ -296,7 +298,8 @@ fn volume(
         style.stroke.0[2],
         style.stroke.0[3].max(200),
     ]);
-    let width = style.stroke_width_px.max(1.0);
+    // Edges unless asked for none (stroke-width 0).
+    let width = style.stroke_width_px;
     for r in rings {
         let n = r.len();
         for i in 0..n {
@@ -308,12 +311,20 @@ fn volume(
                 fill,
             );
         }
+        if width <= 0.0 {
+            continue;
+        }
+        // Vertical edges at the polygon's own vertices (not the densified ones).
+        for c in corners.iter().flatten() {
+            chunks.line(&[at(*c, lower), at(*c, upper)], id, edge, width);
+        }
         for h in [lower, upper] {
             let mut pts: Vec<DVec3> = r.iter().map(|&p| at(p, h)).collect();
             pts.push(at(r[0], h));
             chunks.line(&pts, id, edge, width);
         }
-        if lower <= 0.0 {
+        // Where it stands on the ground (from the surface up), its footprint on the terrain.
+        if lower <= 0.0 && upper > 0.0 {
             let mut pts: Vec<[f64; 2]> = r.iter().map(|p| [p[0], p[1]]).collect();
             pts.push([r[0][0], r[0][1]]);
             let b = Bbox::of(pts.iter().copied());

@@ -1,12 +1,24 @@
 //! The vector overlay's GPU side: two pipelines (fills; lines and points as screen-space
-//! capsules), one instance buffer and one fill vertex buffer that grow by doubling, and a
-//! storage buffer of anchor offsets written every frame.
+//! capsules) drawing from a pool that mirrors the CPU pieces.
+//!
+//! The pool holds, per *entry* (a drawn tile's draped pieces, or one chunk of a feature's
+//! geometry at altitude), a range of the line buffer (a storage buffer the vertex shader
+//! indexes by `vertex_index / 6`, so ranges need no first-instance feature) and a range of
+//! the fill vertex buffer, sub-allocated first fit, plus an anchor slot. An entry is
+//! uploaded once; a frame whose entries changed rewrites only the two indirect argument
+//! lists (one record per drawn entry) and uploads the new entries; every frame writes the
+//! anchors' offsets from the eye. Everything is drawn with two `multi_draw_indirect` calls.
+//! Buffers grow by doubling, copied on the GPU, so ranges stay valid.
 
 use std::mem::size_of;
+use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
 use globus_geo::DVec3;
+use globus_render::RangeAllocator;
+use globus_tiling::TileKey;
 use globus_vector::Rgba;
+use rustc_hash::FxHashMap;
 
 use crate::overlay::FrameContext;
 
@@ -103,7 +115,34 @@ struct Uniforms {
     tolerance: [f32; 4],
 }
 
-/// A buffer that grows by doubling.
+/// What an entry of the pool is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(crate) enum EntryKey {
+    /// A drawn tile's draped pieces.
+    Tile(TileKey),
+    /// Chunk `1` of feature `0`'s geometry at altitude.
+    Chunk(u32, u32),
+}
+
+/// An entry on the GPU.
+#[derive(Clone, Debug)]
+struct Resident {
+    slot: u32,
+    lines: Range<u32>,
+    fills: Range<u32>,
+}
+
+/// The layout `multi_draw_indirect` reads.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct DrawArgs {
+    vertex_count: u32,
+    instance_count: u32,
+    first_vertex: u32,
+    first_instance: u32,
+}
+
+/// A buffer that grows by doubling, keeping its contents (copied on the GPU).
 struct Growing {
     buffer: wgpu::Buffer,
     label: &'static str,
@@ -111,15 +150,36 @@ struct Growing {
 }
 
 impl Growing {
-    fn new(device: &wgpu::Device, label: &'static str, usage: wgpu::BufferUsages) -> Self {
-        let usage = usage | wgpu::BufferUsages::COPY_DST;
+    fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        usage: wgpu::BufferUsages,
+        size: u64,
+    ) -> Self {
+        let usage = usage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
         Self {
-            buffer: buffer(device, label, 256, usage),
+            buffer: buffer(device, label, size, usage),
             label,
             usage,
         }
     }
 
+    /// Makes room for `bytes`, keeping what is there.
+    fn reserve(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: u64) -> bool {
+        if bytes <= self.buffer.size() {
+            return false;
+        }
+        let bigger = buffer(device, self.label, bytes.next_power_of_two(), self.usage);
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("vector pool growth"),
+        });
+        encoder.copy_buffer_to_buffer(&self.buffer, 0, &bigger, 0, self.buffer.size());
+        queue.submit([encoder.finish()]);
+        self.buffer = bigger;
+        true
+    }
+
+    /// Writes `bytes` at the start, growing (without keeping) if needed.
     fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: &[u8]) {
         let need = (bytes.len() as u64).max(16);
         if need > self.buffer.size() {
@@ -139,13 +199,17 @@ fn buffer(
 ) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
-        size: size.div_ceil(16) * 16,
+        size: size.max(16).div_ceil(16) * 16,
         usage,
         mapped_at_creation: false,
     })
 }
 
-/// Pipelines and buffers.
+/// First capacities: lines (instances) and fill vertices.
+const FIRST_LINES: u32 = 1 << 14;
+const FIRST_FILLS: u32 = 1 << 16;
+
+/// Pipelines and the pool.
 pub(crate) struct Gpu {
     fill: wgpu::RenderPipeline,
     line: wgpu::RenderPipeline,
@@ -154,11 +218,23 @@ pub(crate) struct Gpu {
     anchors: Growing,
     lines: Growing,
     fills: Growing,
-    bind_group: Option<(wgpu::BindGroup, u64, wgpu::TextureView)>,
+    line_ranges: RangeAllocator,
+    fill_ranges: RangeAllocator,
+    entries: FxHashMap<EntryKey, Resident>,
+    free_slots: Vec<u32>,
+    slot_origins: Vec<DVec3>,
+    drawn: Vec<EntryKey>,
+    line_draws: Growing,
+    fill_draws: Growing,
+    line_draw_count: u32,
+    fill_draw_count: u32,
+    oit_draws: Growing,
+    oit_draw_count: u32,
+    oit: Oit,
+    bind_group: Option<(wgpu::BindGroup, [u64; 2], wgpu::TextureView)>,
     pub line_count: u32,
     pub fill_vertices: u32,
 }
-
 /// The shader.
 pub const SHADER: &str = include_str!("vector.wgsl");
 
@@ -204,6 +280,15 @@ impl Gpu {
                         sample_type: wgpu::TextureSampleType::Float { filterable: false },
                         view_dimension: wgpu::TextureViewDimension::D2,
                         multisampled: false,
+                    },
+                ),
+                entry(
+                    3,
+                    wgpu::ShaderStages::VERTEX,
+                    wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
                     },
                 ),
             ],
@@ -256,59 +341,212 @@ impl Gpu {
             })],
             formats.depth_test(false),
         );
-        let line_attrs = wgpu::vertex_attr_array![
-            0 => Float32x3, 1 => Uint32, 2 => Float32x3, 3 => Uint32,
-            4 => Uint32, 5 => Uint32, 6 => Float32, 7 => Float32
-        ];
         let mut no_depth_test = formats.depth_test(false);
         no_depth_test.depth_compare = Some(wgpu::CompareFunction::Always);
-        let line = pipeline(
-            "vector lines",
-            "line_vs",
-            "line_fs",
-            &[Some(wgpu::VertexBufferLayout {
-                array_stride: size_of::<LineInstance>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &line_attrs,
-            })],
-            no_depth_test,
-        );
+        let line = pipeline("vector lines", "line_vs", "line_fs", &[], no_depth_test);
         let uniforms = buffer(
             device,
             "vector uniforms",
             size_of::<Uniforms>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
+        let oit = Oit::new(device, &module, &layout, formats, &fill_attrs);
+        let line_bytes = size_of::<LineInstance>() as u64;
+        let fill_bytes = size_of::<FillVertex>() as u64;
         Self {
+            oit,
+            oit_draws: Growing::new(
+                device,
+                "vector volume draws",
+                wgpu::BufferUsages::INDIRECT,
+                256,
+            ),
+            oit_draw_count: 0,
             fill,
             line,
             layout,
             uniforms,
-            anchors: Growing::new(device, "vector anchors", wgpu::BufferUsages::STORAGE),
-            lines: Growing::new(device, "vector lines", wgpu::BufferUsages::VERTEX),
-            fills: Growing::new(device, "vector fills", wgpu::BufferUsages::VERTEX),
+            anchors: Growing::new(device, "vector anchors", wgpu::BufferUsages::STORAGE, 4096),
+            lines: Growing::new(
+                device,
+                "vector lines",
+                wgpu::BufferUsages::STORAGE,
+                u64::from(FIRST_LINES) * line_bytes,
+            ),
+            fills: Growing::new(
+                device,
+                "vector fills",
+                wgpu::BufferUsages::VERTEX,
+                u64::from(FIRST_FILLS) * fill_bytes,
+            ),
+            line_ranges: RangeAllocator::new(FIRST_LINES),
+            fill_ranges: RangeAllocator::new(FIRST_FILLS),
+            entries: FxHashMap::default(),
+            free_slots: Vec::new(),
+            slot_origins: Vec::new(),
+            drawn: Vec::new(),
+            line_draws: Growing::new(
+                device,
+                "vector line draws",
+                wgpu::BufferUsages::INDIRECT,
+                256,
+            ),
+            fill_draws: Growing::new(
+                device,
+                "vector fill draws",
+                wgpu::BufferUsages::INDIRECT,
+                256,
+            ),
+            line_draw_count: 0,
+            fill_draw_count: 0,
             bind_group: None,
             line_count: 0,
             fill_vertices: 0,
         }
     }
 
-    /// Uploads new geometry.
-    pub(crate) fn upload(
+    /// Whether an entry is on the GPU.
+    pub(crate) fn has(&self, key: EntryKey) -> bool {
+        self.entries.contains_key(&key)
+    }
+
+    /// Puts an entry on the GPU (its pieces' anchor fields are set to its slot).
+    pub(crate) fn insert(
         &mut self,
         frame: &FrameContext<'_>,
+        key: EntryKey,
+        origin: DVec3,
         lines: &[LineInstance],
         fills: &[FillVertex],
     ) {
+        self.remove(key);
         let (device, queue) = (frame.device(), frame.queue());
-        self.lines.write(device, queue, bytemuck::cast_slice(lines));
-        self.fills.write(device, queue, bytemuck::cast_slice(fills));
-        self.line_count = lines.len() as u32;
-        self.fill_vertices = fills.len() as u32;
+        let slot = self
+            .free_slots
+            .pop()
+            .unwrap_or(self.slot_origins.len() as u32);
+        if slot as usize >= self.slot_origins.len() {
+            self.slot_origins.push(origin);
+        } else {
+            self.slot_origins[slot as usize] = origin;
+        }
+        let line_range = allocate(&mut self.line_ranges, lines.len() as u32);
+        let fill_range = allocate(&mut self.fill_ranges, fills.len() as u32);
+        let line_bytes = size_of::<LineInstance>() as u64;
+        let fill_bytes = size_of::<FillVertex>() as u64;
+        self.lines.reserve(
+            device,
+            queue,
+            u64::from(self.line_ranges.capacity()) * line_bytes,
+        );
+        self.fills.reserve(
+            device,
+            queue,
+            u64::from(self.fill_ranges.capacity()) * fill_bytes,
+        );
+        if !lines.is_empty() {
+            let l: Vec<LineInstance> = lines
+                .iter()
+                .map(|l| LineInstance { anchor: slot, ..*l })
+                .collect();
+            queue.write_buffer(
+                &self.lines.buffer,
+                u64::from(line_range.start) * line_bytes,
+                bytemuck::cast_slice(&l),
+            );
+        }
+        if !fills.is_empty() {
+            let f: Vec<FillVertex> = fills
+                .iter()
+                .map(|f| FillVertex {
+                    anchor: (f.anchor & DRAPED_BIT) | slot,
+                    ..*f
+                })
+                .collect();
+            queue.write_buffer(
+                &self.fills.buffer,
+                u64::from(fill_range.start) * fill_bytes,
+                bytemuck::cast_slice(&f),
+            );
+        }
+        self.entries.insert(
+            key,
+            Resident {
+                slot,
+                lines: line_range,
+                fills: fill_range,
+            },
+        );
     }
 
-    /// Writes this frame's uniforms and anchor offsets (anchor minus eye, in f64 first).
-    pub(crate) fn frame(&mut self, frame: &FrameContext<'_>, anchors: &[DVec3]) {
+    /// Takes an entry off the GPU.
+    pub(crate) fn remove(&mut self, key: EntryKey) {
+        if let Some(r) = self.entries.remove(&key) {
+            self.line_ranges.free(r.lines);
+            self.fill_ranges.free(r.fills);
+            self.free_slots.push(r.slot);
+        }
+    }
+
+    /// Entries on the GPU.
+    pub(crate) fn keys(&self) -> impl Iterator<Item = EntryKey> + '_ {
+        self.entries.keys().copied()
+    }
+
+    /// Sets what is drawn: the indirect records of `drawn` (entries on the GPU).
+    pub(crate) fn set_drawn(&mut self, frame: &FrameContext<'_>, drawn: &[EntryKey]) {
+        let (device, queue) = (frame.device(), frame.queue());
+        self.drawn.clear();
+        let mut line_args = Vec::new();
+        let mut fill_args = Vec::new();
+        let mut oit_args = Vec::new();
+        let (mut lines, mut fills) = (0u32, 0u32);
+        for key in drawn {
+            let Some(r) = self.entries.get(key) else {
+                continue;
+            };
+            self.drawn.push(*key);
+            if !r.lines.is_empty() {
+                line_args.push(DrawArgs {
+                    vertex_count: r.lines.len() as u32 * 6,
+                    instance_count: 1,
+                    first_vertex: r.lines.start * 6,
+                    first_instance: 0,
+                });
+                lines += r.lines.len() as u32;
+            }
+            if !r.fills.is_empty() {
+                let args = DrawArgs {
+                    vertex_count: r.fills.len() as u32,
+                    instance_count: 1,
+                    first_vertex: r.fills.start,
+                    first_instance: 0,
+                };
+                // Geometry at altitude (volumes, fills in the air) is translucent over
+                // anything: order-independent; draped fills lie on the terrain, in order.
+                match key {
+                    EntryKey::Tile(_) => fill_args.push(args),
+                    EntryKey::Chunk(..) => oit_args.push(args),
+                }
+                fills += r.fills.len() as u32;
+            }
+        }
+        self.line_draws
+            .write(device, queue, bytemuck::cast_slice(&line_args));
+        self.fill_draws
+            .write(device, queue, bytemuck::cast_slice(&fill_args));
+        self.oit_draws
+            .write(device, queue, bytemuck::cast_slice(&oit_args));
+        self.oit_draw_count = oit_args.len() as u32;
+        self.line_draw_count = line_args.len() as u32;
+        self.fill_draw_count = fill_args.len() as u32;
+        self.line_count = lines;
+        self.fill_vertices = fills;
+    }
+
+    /// Writes this frame's uniforms and the drawn entries' anchor offsets (anchor minus eye,
+    /// in f64 first).
+    pub(crate) fn frame(&mut self, frame: &FrameContext<'_>) {
         let (device, queue) = (frame.device(), frame.queue());
         let camera = frame.camera();
         let (w, h) = camera.viewport_px();
@@ -319,22 +557,22 @@ impl Gpu {
             tolerance: [FILL_TOLERANCE, LINE_TOLERANCE, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
-        let offsets: Vec<[f32; 4]> = anchors
-            .iter()
-            .map(|&a| {
-                let r = camera.relative(a);
-                [r.x, r.y, r.z, 0.0]
-            })
-            .collect();
+        let mut offsets = vec![[0f32; 4]; self.slot_origins.len().max(1)];
+        for key in &self.drawn {
+            if let Some(r) = self.entries.get(key) {
+                let o = camera.relative(self.slot_origins[r.slot as usize]);
+                offsets[r.slot as usize] = [o.x, o.y, o.z, 0.0];
+            }
+        }
         self.anchors
             .write(device, queue, bytemuck::cast_slice(&offsets));
         // The bind group follows the anchor buffer and the frame's depth texture.
         let depth = frame.terrain_depth();
-        let anchor_size = self.anchors.buffer.size();
+        let sizes = [self.anchors.buffer.size(), self.lines.buffer.size()];
         if self
             .bind_group
             .as_ref()
-            .is_none_or(|(_, size, view)| *size != anchor_size || view != depth)
+            .is_none_or(|(_, s, view)| *s != sizes || view != depth)
         {
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vector"),
@@ -352,36 +590,371 @@ impl Gpu {
                         binding: 2,
                         resource: wgpu::BindingResource::TextureView(frame.terrain_depth()),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: self.lines.buffer.as_entire_binding(),
+                    },
                 ],
             });
-            self.bind_group = Some((group, anchor_size, depth.clone()));
+            self.bind_group = Some((group, sizes, depth.clone()));
         }
     }
 
-    /// Draws fills, then lines and points: two draw calls.
+    /// Accumulates the translucent geometry at altitude into the OIT targets (a pass of
+    /// its own, tested against the terrain's depth).
+    pub(crate) fn record(&mut self, frame: &FrameContext<'_>, encoder: &mut wgpu::CommandEncoder) {
+        if self.oit_draw_count == 0 {
+            return;
+        }
+        let (w, h) = frame.camera().viewport_px();
+        self.oit.targets(frame.device(), (w.max(1), h.max(1)));
+        self.oit
+            .frame_group(frame.device(), &self.uniforms, &self.anchors.buffer);
+        let (Some(t), Some((group, _))) = (&self.oit.textures, &self.oit.group) else {
+            return;
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("vector volumes (OIT)"),
+            color_attachments: &[
+                Some(wgpu::RenderPassColorAttachment {
+                    view: &t.accum,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                }),
+                Some(wgpu::RenderPassColorAttachment {
+                    view: &t.reveal,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                        store: wgpu::StoreOp::Store,
+                    },
+                }),
+            ],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: frame.terrain_depth(),
+                depth_ops: None,
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.oit.accumulate);
+        pass.set_bind_group(0, group, &[]);
+        pass.set_vertex_buffer(0, self.fills.buffer.slice(..));
+        pass.multi_draw_indirect(&self.oit_draws.buffer, 0, self.oit_draw_count);
+    }
+
+    /// Draws draped fills, the translucent geometry at altitude composited, then lines and
+    /// points: at most three draw calls.
     pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
         let Some((group, _, _)) = &self.bind_group else {
             return 0;
         };
         let mut calls = 0;
         pass.set_bind_group(0, group, &[]);
-        if self.fill_vertices > 0 {
+        if self.fill_draw_count > 0 {
             pass.set_pipeline(&self.fill);
             pass.set_vertex_buffer(0, self.fills.buffer.slice(..));
-            pass.draw(0..self.fill_vertices, 0..1);
+            pass.multi_draw_indirect(&self.fill_draws.buffer, 0, self.fill_draw_count);
             calls += 1;
         }
-        if self.line_count > 0 {
+        if self.oit_draw_count > 0
+            && let Some(t) = &self.oit.textures
+        {
+            pass.set_pipeline(&self.oit.composite);
+            pass.set_bind_group(1, &t.group, &[]);
+            pass.draw(0..3, 0..1);
+            calls += 1;
+        }
+        if self.line_draw_count > 0 {
             pass.set_pipeline(&self.line);
-            pass.set_vertex_buffer(0, self.lines.buffer.slice(..));
-            pass.draw(0..6, 0..self.line_count);
+            pass.multi_draw_indirect(&self.line_draws.buffer, 0, self.line_draw_count);
             calls += 1;
         }
         calls
     }
 
+    /// Draw calls a frame makes: draped fills, the volumes' accumulation and composite, lines.
+    pub(crate) fn draw_calls(&self) -> u32 {
+        u32::from(self.fill_draw_count > 0)
+            + 2 * u32::from(self.oit_draw_count > 0)
+            + u32::from(self.line_draw_count > 0)
+    }
+
     /// GPU bytes held.
     pub(crate) fn bytes(&self) -> u64 {
-        self.anchors.buffer.size() + self.lines.buffer.size() + self.fills.buffer.size()
+        [
+            &self.anchors,
+            &self.lines,
+            &self.fills,
+            &self.line_draws,
+            &self.fill_draws,
+            &self.oit_draws,
+        ]
+        .iter()
+        .map(|b| b.buffer.size())
+        .sum::<u64>()
+            + self.oit.textures.as_ref().map_or(0, |t| {
+                u64::from(t.size.0) * u64::from(t.size.1) * (OIT_ACCUM_BYTES + OIT_REVEAL_BYTES)
+            })
+    }
+}
+
+const OIT_ACCUM: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+const OIT_REVEAL: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
+const OIT_ACCUM_BYTES: u64 = 8;
+const OIT_REVEAL_BYTES: u64 = 1;
+
+/// Weighted blended order-independent transparency (McGuire and Bavoil, "Weighted Blended
+/// Order-Independent Transparency", JCGT 2013): translucent faces add their weighted colour
+/// to one target and multiply the revealed background in another, in any order; a
+/// full-screen pass composites the weighted average over the frame. Chosen over sorting
+/// because volumes intersect each other and the camera goes inside them, where no order of
+/// whole faces is right, and because it costs no CPU when the camera moves.
+struct Oit {
+    accumulate: wgpu::RenderPipeline,
+    composite: wgpu::RenderPipeline,
+    frame_layout: wgpu::BindGroupLayout,
+    texture_layout: wgpu::BindGroupLayout,
+    group: Option<(wgpu::BindGroup, [u64; 1])>,
+    textures: Option<OitTextures>,
+}
+
+struct OitTextures {
+    size: (u32, u32),
+    accum: wgpu::TextureView,
+    reveal: wgpu::TextureView,
+    group: wgpu::BindGroup,
+}
+
+impl Oit {
+    fn new(
+        device: &wgpu::Device,
+        module: &wgpu::ShaderModule,
+        main_layout: &wgpu::BindGroupLayout,
+        formats: globus_render::FrameFormats,
+        fill_attrs: &[wgpu::VertexAttribute],
+    ) -> Self {
+        let buffer_entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vector oit frame"),
+            entries: &[
+                buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                wgpu::BindGroupLayoutEntry {
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ..buffer_entry(1, wgpu::BufferBindingType::Storage { read_only: true })
+                },
+            ],
+        });
+        let texture = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let texture_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vector oit textures"),
+            entries: &[texture(0), texture(1)],
+        });
+        let accumulate_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vector oit accumulate"),
+            bind_group_layouts: &[Some(&frame_layout)],
+            immediate_size: 0,
+        });
+        let add = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::One,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let reveal = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::Zero,
+            dst_factor: wgpu::BlendFactor::OneMinusSrc,
+            operation: wgpu::BlendOperation::Add,
+        };
+        let accumulate = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("vector oit accumulate"),
+            layout: Some(&accumulate_layout),
+            vertex: wgpu::VertexState {
+                module,
+                entry_point: Some("oit_vs"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: size_of::<FillVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: fill_attrs,
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(formats.depth_test(false)),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module,
+                entry_point: Some("oit_fs"),
+                compilation_options: Default::default(),
+                targets: &[
+                    Some(wgpu::ColorTargetState {
+                        format: OIT_ACCUM,
+                        blend: Some(wgpu::BlendState {
+                            color: add,
+                            alpha: add,
+                        }),
+                        write_mask: wgpu::ColorWrites::ALL,
+                    }),
+                    Some(wgpu::ColorTargetState {
+                        format: OIT_REVEAL,
+                        blend: Some(wgpu::BlendState {
+                            color: reveal,
+                            alpha: reveal,
+                        }),
+                        write_mask: wgpu::ColorWrites::ALL,
+                    }),
+                ],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let composite_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vector oit composite"),
+            bind_group_layouts: &[Some(main_layout), Some(&texture_layout)],
+            immediate_size: 0,
+        });
+        let mut always = formats.depth_test(false);
+        always.depth_compare = Some(wgpu::CompareFunction::Always);
+        let composite = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("vector oit composite"),
+            layout: Some(&composite_layout),
+            vertex: wgpu::VertexState {
+                module,
+                entry_point: Some("composite_vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(always),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module,
+                entry_point: Some("composite_fs"),
+                compilation_options: Default::default(),
+                targets: &formats.colour_targets(Some(wgpu::BlendState::ALPHA_BLENDING), false),
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            accumulate,
+            composite,
+            frame_layout,
+            texture_layout,
+            group: None,
+            textures: None,
+        }
+    }
+
+    /// The accumulation targets, `size` pixels.
+    fn targets(&mut self, device: &wgpu::Device, size: (u32, u32)) {
+        if self.textures.as_ref().is_some_and(|t| t.size == size) {
+            return;
+        }
+        let make = |label, format| {
+            device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: size.0,
+                        height: size.1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+                .create_view(&wgpu::TextureViewDescriptor::default())
+        };
+        let accum = make("vector oit accum", OIT_ACCUM);
+        let reveal = make("vector oit reveal", OIT_REVEAL);
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vector oit textures"),
+            layout: &self.texture_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&accum),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&reveal),
+                },
+            ],
+        });
+        self.textures = Some(OitTextures {
+            size,
+            accum,
+            reveal,
+            group,
+        });
+    }
+
+    /// The accumulation pass's bind group (uniforms and anchors).
+    fn frame_group(
+        &mut self,
+        device: &wgpu::Device,
+        uniforms: &wgpu::Buffer,
+        anchors: &wgpu::Buffer,
+    ) {
+        let key = [anchors.size()];
+        if self.group.as_ref().is_some_and(|(_, k)| *k == key) {
+            return;
+        }
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vector oit frame"),
+            layout: &self.frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: anchors.as_entire_binding(),
+                },
+            ],
+        });
+        self.group = Some((group, key));
+    }
+}
+
+/// A range of `len`, growing the allocator (doubling) when none is free.
+fn allocate(ranges: &mut RangeAllocator, len: u32) -> Range<u32> {
+    loop {
+        if let Some(r) = ranges.allocate(len) {
+            return r;
+        }
+        let capacity = ranges.capacity();
+        let grown = capacity.saturating_mul(2).max(capacity.saturating_add(len));
+        ranges.grow(grown);
     }
 }

@@ -13,15 +13,16 @@
 //!   split into chunks of at most 100 km, each with its own origin: f32 holds offsets only.
 //! * Per frame, when nothing changed, the CPU writes the anchors' offsets from the eye (one
 //!   per drawn tile and chunk) and the uniforms: nothing else. When the drawn tiles or the
-//!   features change, the instance buffers are rebuilt from the kept pieces.
-//! * Everything is drawn in two draw calls: fills (draped, then volumes' faces), then lines
-//!   and points.
+//!   features change, only new entries (a tile's pieces, a feature's chunks) are uploaded
+//!   into the GPU pool and the indirect draw records rewritten ([`gpu`]).
+//! * Everything is drawn in two multi-draw calls: fills (draped, then volumes' faces), then
+//!   lines and points.
 //!
 //! Picking: every feature writes its pick id (see [`VectorLayer::pick_id`]) into the id
 //! buffer; [`VectorLayer::feature_for_pick`] maps a [`crate::Pick::object`] back to it.
 
 mod build;
-mod gpu;
+pub(crate) mod gpu;
 
 use std::path::Path;
 use std::time::Instant;
@@ -33,7 +34,7 @@ use rustc_hash::FxHashMap;
 
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use build::{Bbox, Built, TileDrape};
-use gpu::{FillVertex, Gpu, LineInstance};
+use gpu::{EntryKey, Gpu};
 
 pub use gpu::SHADER;
 
@@ -42,7 +43,7 @@ pub use gpu::SHADER;
 pub struct FeatureId(pub u32);
 
 /// Draped pieces of tiles kept beyond those drawn.
-const KEPT_TILES: usize = 2048;
+const KEPT_TILES: usize = 512;
 
 /// What the layer holds and what its last frame did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -85,7 +86,8 @@ pub struct VectorLayer {
     last_drawn: Vec<TileKey>,
     geometry_changed: bool,
     gpu: Option<Gpu>,
-    anchors: Vec<DVec3>,
+    /// GPU entries to drop (features changed or removed, tiles invalidated).
+    released: Vec<EntryKey>,
     stats: VectorStats,
 }
 
@@ -116,7 +118,7 @@ impl VectorLayer {
             last_drawn: Vec::new(),
             geometry_changed: false,
             gpu: None,
-            anchors: Vec::new(),
+            released: Vec::new(),
             stats: VectorStats::default(),
         }
     }
@@ -161,6 +163,8 @@ impl VectorLayer {
         if let Some(b) = e.built.take() {
             self.invalid.extend(b.bbox);
             self.geometry_changed |= !b.chunks.is_empty();
+            self.released
+                .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id.0, i)));
         }
         e.feature = feature;
         self.pending.push(id.0);
@@ -175,6 +179,8 @@ impl VectorLayer {
         if let Some(b) = e.built {
             self.invalid.extend(b.bbox);
             self.geometry_changed |= !b.chunks.is_empty();
+            self.released
+                .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id.0, i)));
         }
         true
     }
@@ -216,9 +222,14 @@ impl VectorLayer {
             self.built_for = Some((*ellipsoid, exaggeration));
             self.pending = self.entries.keys().copied().collect();
             self.pending.sort_unstable();
-            for e in self.entries.values_mut() {
-                e.built = None;
+            for (&id, e) in &mut self.entries {
+                if let Some(b) = e.built.take() {
+                    self.released
+                        .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id, i)));
+                }
             }
+            self.released
+                .extend(self.tiles.keys().map(|&k| EntryKey::Tile(k)));
             self.tiles.clear();
             self.geometry_changed = true;
         }
@@ -239,8 +250,14 @@ impl VectorLayer {
         }
         if !self.invalid.is_empty() {
             let invalid = std::mem::take(&mut self.invalid);
-            self.tiles
-                .retain(|_, t| !invalid.iter().any(|b| b.overlaps(t.rect)));
+            let released = &mut self.released;
+            self.tiles.retain(|&key, t| {
+                let keep = !invalid.iter().any(|b| b.overlaps(t.rect));
+                if !keep {
+                    released.push(EntryKey::Tile(key));
+                }
+                keep
+            });
         }
         built
     }
@@ -289,12 +306,16 @@ impl VectorLayer {
         draped
     }
 
-    /// Rebuilds the instance arrays from the drawn tiles' pieces and the chunks.
-    fn rebuild(&mut self, frame: &FrameContext<'_>) {
-        self.anchors.clear();
-        let mut lines: Vec<LineInstance> = Vec::new();
-        let mut fills: Vec<FillVertex> = Vec::new();
-        let mut points: Vec<LineInstance> = Vec::new();
+    /// Puts what this frame draws on the GPU (uploading only entries not there yet), drops
+    /// tiles' entries not drawn for a while, and sets the draw records.
+    fn sync_gpu(&mut self, frame: &FrameContext<'_>) {
+        let Some(gpu) = self.gpu.as_mut() else {
+            return;
+        };
+        for key in self.released.drain(..) {
+            gpu.remove(key);
+        }
+        let mut drawn = Vec::new();
         for d in frame.drawn_tiles() {
             let Some(t) = self.tiles.get(&d.key) else {
                 continue;
@@ -302,14 +323,13 @@ impl VectorLayer {
             if t.drape.is_empty() {
                 continue;
             }
-            let anchor = self.anchors.len() as u32;
-            self.anchors.push(t.origin);
-            lines.extend(t.drape.lines.iter().map(|l| LineInstance { anchor, ..*l }));
-            points.extend(t.drape.points.iter().map(|l| LineInstance { anchor, ..*l }));
-            fills.extend(t.drape.fills.iter().map(|f| FillVertex {
-                anchor: f.anchor | anchor,
-                ..*f
-            }));
+            let key = EntryKey::Tile(d.key);
+            if !gpu.has(key) {
+                let mut lines = t.drape.lines.clone();
+                lines.extend_from_slice(&t.drape.points);
+                gpu.insert(frame, key, t.origin, &lines, &t.drape.fills);
+            }
+            drawn.push(key);
         }
         let mut ids: Vec<u32> = self.entries.keys().copied().collect();
         ids.sort_unstable();
@@ -317,22 +337,35 @@ impl VectorLayer {
             let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref()) else {
                 continue;
             };
-            for c in &b.chunks {
-                let anchor = self.anchors.len() as u32;
-                self.anchors.push(c.origin);
-                lines.extend(c.lines.iter().map(|l| LineInstance { anchor, ..*l }));
-                fills.extend(c.fills.iter().map(|f| FillVertex {
-                    anchor: f.anchor | anchor,
-                    ..*f
-                }));
+            for (i, c) in b.chunks.iter().enumerate() {
+                let key = EntryKey::Chunk(id, i as u32);
+                if !gpu.has(key) {
+                    gpu.insert(frame, key, c.origin, &c.lines, &c.fills);
+                }
+                drawn.push(key);
             }
         }
-        lines.extend(points);
-        if let Some(gpu) = &mut self.gpu {
-            gpu.upload(frame, &lines, &fills);
+        // Tiles not drawn for a while leave the GPU (their pieces stay on the CPU).
+        let now = self.frame;
+        let stale: Vec<EntryKey> = gpu
+            .keys()
+            .filter(|k| match k {
+                EntryKey::Tile(t) => self
+                    .tiles
+                    .get(t)
+                    .is_none_or(|c| now.saturating_sub(c.last_used) > GPU_KEEP_FRAMES),
+                EntryKey::Chunk(..) => false,
+            })
+            .collect();
+        for k in stale {
+            gpu.remove(k);
         }
+        gpu.set_drawn(frame, &drawn);
     }
 }
+
+/// Frames a tile's pieces stay on the GPU after it was last drawn.
+const GPU_KEEP_FRAMES: u64 = 30;
 
 /// A drawn tile's draped pieces.
 struct CachedTile {
@@ -365,29 +398,36 @@ impl Overlay for VectorLayer {
                 .iter()
                 .zip(&self.last_drawn)
                 .any(|(d, k)| d.key != *k);
-        let rebuild = drawn_changed || draped > 0 || built > 0 || self.geometry_changed;
+        let rebuild = drawn_changed
+            || draped > 0
+            || built > 0
+            || self.geometry_changed
+            || !self.released.is_empty();
         if rebuild {
             self.last_drawn.clear();
             self.last_drawn
                 .extend(frame.drawn_tiles().iter().map(|d| d.key));
             self.geometry_changed = false;
-            self.rebuild(frame);
+            self.sync_gpu(frame);
         }
-        let anchors = std::mem::take(&mut self.anchors);
         if let Some(gpu) = &mut self.gpu {
-            gpu.frame(frame, &anchors);
+            gpu.frame(frame);
             self.stats.line_instances = gpu.line_count;
             self.stats.fill_vertices = gpu.fill_vertices;
             self.stats.gpu_bytes = gpu.bytes();
-            self.stats.draw_calls =
-                u32::from(gpu.fill_vertices > 0) + u32::from(gpu.line_count > 0);
+            self.stats.draw_calls = gpu.draw_calls();
         }
-        self.anchors = anchors;
         self.stats.features = self.entries.len();
         self.stats.tiles_draped = draped;
         self.stats.features_built = built;
         self.stats.rebuilt = rebuild;
         self.stats.prepare_s = started.elapsed().as_secs_f64();
+    }
+
+    fn record(&mut self, frame: &FrameContext<'_>, encoder: &mut wgpu::CommandEncoder) {
+        if let Some(gpu) = &mut self.gpu {
+            gpu.record(frame, encoder);
+        }
     }
 
     fn draw(&self, _: OverlayPass, _: &FrameContext<'_>, pass: &mut wgpu::RenderPass<'_>) {

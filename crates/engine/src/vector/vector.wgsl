@@ -66,20 +66,76 @@ fn fill_fs(in: FillOut) -> Target {
     return Target(in.colour, in.id);
 }
 
+// ---- translucent geometry at altitude: weighted blended order-independent transparency
+// (McGuire and Bavoil 2013), accumulated in targets of the layer's own against the terrain's
+// depth, then composited over the frame ----
+
+struct OitOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) @interpolate(flat) colour: vec4<f32>,
+    @location(1) distance_m: f32,
+}
+
+@vertex
+fn oit_vs(v: FillIn) -> OitOut {
+    let eye = anchors[v.anchor & ~DRAPED_BIT].xyz + v.position;
+    let clip = frame.clip_from_eye * vec4<f32>(eye, 1.0);
+    return OitOut(clip, unpack_colour(v.colour), length(eye));
+}
+
+struct OitTargets {
+    @location(0) accum: vec4<f32>,
+    @location(1) reveal: vec4<f32>,
+}
+
+@fragment
+fn oit_fs(in: OitOut) -> OitTargets {
+    let a = in.colour.a;
+    // McGuire and Bavoil's equation (9), distances in kilometres (a planet's scenes are a
+    // thousand times larger than the rooms it was tuned for).
+    let d = in.distance_m / 1000.0;
+    let w = clamp(10.0 / (1e-5 + pow(d / 5.0, 2.0) + pow(d / 200.0, 6.0)), 1e-2, 3e3);
+    return OitTargets(vec4<f32>(in.colour.rgb * a, a) * w, vec4<f32>(a));
+}
+
+@group(1) @binding(0) var oit_accum: texture_2d<f32>;
+@group(1) @binding(1) var oit_reveal: texture_2d<f32>;
+
+@vertex
+fn composite_vs(@builtin(vertex_index) v: u32) -> @builtin(position) vec4<f32> {
+    let p = vec2<f32>(f32((v << 1u) & 2u), f32(v & 2u));
+    return vec4<f32>(p * 2.0 - 1.0, 0.0, 1.0);
+}
+
+@fragment
+fn composite_fs(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
+    let t = vec2<i32>(p.xy);
+    let accum = textureLoad(oit_accum, t, 0);
+    let reveal = textureLoad(oit_reveal, t, 0).r;
+    if (accum.a < 1e-6) {
+        discard;
+    }
+    return vec4<f32>(accum.rgb / clamp(accum.a, 1e-4, 5e4), 1.0 - reveal);
+}
+
 // ---- lines and points ----
 
-struct LineIn {
-    @location(0) a: vec3<f32>,
-    @location(1) anchor: u32,
-    @location(2) b: vec3<f32>,
-    @location(3) id: u32,
-    @location(4) colour: u32,
-    @location(5) outline: u32,
+// One segment or point (mirrors `LineInstance`, 48 bytes), six vertices each: read by
+// vertex index, so every drawn entry's range is one record of a multi-draw.
+struct Line {
+    a: vec3<f32>,
+    anchor: u32,
+    b: vec3<f32>,
+    id: u32,
+    colour: u32,
+    outline: u32,
     // Width (lines) or diameter (points), pixels.
-    @location(6) width_px: f32,
+    width_px: f32,
     // Outline width, pixels; negative: a square symbol.
-    @location(7) outline_px: f32,
+    outline_px: f32,
 }
+
+@group(0) @binding(3) var<storage, read> lines: array<Line>;
 
 struct LineOut {
     @builtin(position) clip: vec4<f32>,
@@ -100,7 +156,8 @@ fn to_pixels(clip: vec4<f32>) -> vec2<f32> {
 }
 
 @vertex
-fn line_vs(v: LineIn, @builtin(vertex_index) vertex: u32) -> LineOut {
+fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
+    let v = lines[vertex / 6u];
     var out: LineOut;
     let anchor = anchors[v.anchor].xyz;
     var ca = frame.clip_from_eye * vec4<f32>(anchor + v.a, 1.0);
