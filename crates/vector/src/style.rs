@@ -94,6 +94,11 @@ pub struct Style {
     /// Vertical limits of an extruded polygon (lower, upper), metres in `clamp`'s reference
     /// (`None`: drawn flat).
     pub extrude: Option<(f64, f64)>,
+    /// Lines hang a curtain (`fill` colour) from themselves down to the ground.
+    pub wall: bool,
+    /// Lines are drawn as a tube (`fill` colour) of this horizontal radius and vertical half
+    /// height, metres (Kaiser's flight-plan tunnel: 5 NM and one flight level).
+    pub corridor: Option<(f64, f64)>,
 }
 
 impl Default for Style {
@@ -109,6 +114,8 @@ impl Default for Style {
             clamp: Clamp::Ground,
             path: PathKind::Geodesic,
             extrude: None,
+            wall: false,
+            corridor: None,
         }
     }
 }
@@ -121,12 +128,15 @@ const MARKER_LARGE_PX: f32 = 18.0;
 /// Widest line or largest symbol, pixels.
 pub const MAX_PIXELS: f32 = 256.0;
 
-/// Feet in a metre's units: one international foot.
+/// One international foot, metres.
 pub const FOOT_M: f64 = 0.3048;
 
-/// Parses a vertical limit: a number in `default_unit`, or a number followed by `m`, `ft`
-/// or preceded by `FL` (flight level: hundreds of feet), e.g. `FL195`, `3500 ft`, `120m`,
-/// `"GND"`/`"SFC"` (0). Returns metres.
+/// One nautical mile, metres.
+pub const NAUTICAL_MILE_M: f64 = 1852.0;
+
+/// Parses a height or distance: a number in `default_unit`, or a number followed by `m`,
+/// `km`, `ft` or `NM`, or preceded by `FL` (flight level: hundreds of feet), e.g. `FL195`,
+/// `3500 ft`, `120m`, `5NM`, `"GND"`/`"SFC"` (0). Returns metres.
 pub fn parse_height(value: &Value, default_unit: &str) -> Option<f64> {
     let (number, unit) = match value {
         Value::Number(n) => (n.as_f64()?, default_unit.to_owned()),
@@ -149,6 +159,8 @@ pub fn parse_height(value: &Value, default_unit: &str) -> Option<f64> {
     };
     let metres = match unit.to_ascii_lowercase().as_str() {
         "m" => number,
+        "km" => number * 1000.0,
+        "nm" => number * NAUTICAL_MILE_M,
         "ft" | "feet" => number * FOOT_M,
         "fl" => number * 100.0 * FOOT_M,
         _ => return None,
@@ -278,6 +290,24 @@ impl StyleRules {
             }
             None => false,
         };
+        match get("wall") {
+            Some(Value::Bool(b)) => style.wall = *b,
+            Some(Value::String(s)) if s == "true" || s == "false" => style.wall = s == "true",
+            Some(v) => bad("wall", v),
+            None => {}
+        }
+        if let Some(v) = get("corridor") {
+            let unit = get("units").and_then(Value::as_str).unwrap_or("m");
+            let radius = parse_height(v, unit).filter(|r| *r > 0.0 && *r <= 1.0e6);
+            let half = match get("corridor-height") {
+                Some(h) => parse_height(h, unit).filter(|r| *r > 0.0 && *r <= 1.0e6),
+                None => radius,
+            };
+            match (radius, half) {
+                (Some(r), Some(h)) => style.corridor = Some((r, h)),
+                _ => bad("corridor", v),
+            }
+        }
         if extrude || get("lower").is_some() || get("upper").is_some() {
             let unit = get("units").and_then(Value::as_str).unwrap_or("m");
             let lower = limit(&sources, "lower", ("LOWERLIMIT", "LOWERUNIT"), unit);
@@ -364,6 +394,9 @@ pub const KEYS: &[&str] = &[
     "units",
     "clamp",
     "path",
+    "wall",
+    "corridor",
+    "corridor-height",
 ];
 
 fn percent_decode(s: &str) -> Option<String> {
@@ -445,6 +478,20 @@ mod tests {
         assert!(StyleRules::from_fragment("strok=1").is_err());
         assert!(StyleRules::from_fragment("stroke").is_err());
         assert!(StyleRules::from_fragment("stroke=%zz").is_err());
+    }
+
+    #[test]
+    fn corridors_take_nautical_miles_and_flight_levels() {
+        let mut w = Vec::new();
+        let s = StyleRules::default().resolve(
+            &props(json!({"corridor": "5NM", "corridor-height": "FL1", "wall": "true"})),
+            &mut w,
+        );
+        assert_eq!(s.corridor, Some((5.0 * NAUTICAL_MILE_M, 100.0 * FOOT_M)));
+        assert!(s.wall);
+        let s = StyleRules::default().resolve(&props(json!({"corridor": -3})), &mut w);
+        assert_eq!(s.corridor, None);
+        assert_eq!(w.len(), 1, "{w:?}");
     }
 
     #[test]

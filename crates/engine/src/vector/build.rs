@@ -121,21 +121,78 @@ pub(crate) struct Built {
     pub chunks: Vec<Chunk>,
 }
 
-/// Builds a feature's geometry for a body and exaggeration.
-pub(crate) fn build(feature: &Feature, id: u32, ellipsoid: &Ellipsoid, exaggeration: f64) -> Built {
+/// Builds a feature's geometry for a body and exaggeration; `ground_m(lon_deg, lat_deg)` is
+/// the terrain's height (true metres) where heights are relative to it and walls end.
+pub(crate) fn build(
+    feature: &Feature,
+    id: u32,
+    ellipsoid: &Ellipsoid,
+    exaggeration: f64,
+    ground_m: &dyn Fn(f64, f64) -> f64,
+) -> Built {
     let style = &feature.style;
     let mut out = Built::default();
+    let relative = style.clamp == Clamp::Relative;
+    // Heights above the ellipsoid (relative ones raised by the ground under them), drawn
+    // raised by the exaggeration.
     let world = |p: Position| {
+        let h = if relative {
+            p[2] + ground_m(p[0], p[1])
+        } else {
+            p[2]
+        };
         ellipsoid.cartographic_to_ecef(Cartographic::new(
             p[0].to_radians(),
             p[1].to_radians(),
-            p[2] * exaggeration,
+            h * exaggeration,
         ))
     };
-    let ground = matches!(style.clamp, Clamp::Ground | Clamp::Relative);
+    let ground = style.clamp == Clamp::Ground;
     let mut chunks = ChunkWriter::default();
     let lonlat = |pts: &[Position]| pts.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>();
     for line in &feature.lines {
+        if style.wall || style.corridor.is_some() {
+            let tolerance = style
+                .corridor
+                .map_or(PATH_TOLERANCE_M, |(r, _)| (r / 100.0).max(PATH_TOLERANCE_M));
+            let d = shape::densify(
+                ellipsoid,
+                line,
+                false,
+                style.path,
+                Straight::Chord,
+                tolerance,
+            );
+            if let Some((radius, half_height)) = style.corridor {
+                corridor(
+                    &d,
+                    radius,
+                    half_height * exaggeration,
+                    style.fill,
+                    id,
+                    ellipsoid,
+                    &world,
+                    &mut chunks,
+                );
+            }
+            if style.wall {
+                wall(
+                    &d,
+                    style.fill,
+                    id,
+                    &world,
+                    &|p| {
+                        let h = ground_m(p[0], p[1]) - WALL_FOOT_M;
+                        ellipsoid.cartographic_to_ecef(Cartographic::new(
+                            p[0].to_radians(),
+                            p[1].to_radians(),
+                            h * exaggeration,
+                        ))
+                    },
+                    &mut chunks,
+                );
+            }
+        }
         if style.stroke_width_px <= 0.0 || style.stroke.0[3] == 0 {
             continue;
         }
@@ -342,6 +399,117 @@ fn volume(
     }
 }
 
+/// How far below the ground a wall reaches (hidden there), metres: no gap where the drawn
+/// terrain is a little lower than the loaded heights say.
+const WALL_FOOT_M: f64 = 50.0;
+
+/// Sides of a corridor's cross-section.
+const CORRIDOR_SIDES: usize = 16;
+
+/// Largest turn, radians, between two rings of a corridor's joint.
+const CORRIDOR_JOINT_STEP_RAD: f64 = 0.26;
+
+/// A curtain from a line down to the ground (`foot` gives each vertex's bottom).
+fn wall(
+    pts: &[Position],
+    colour: Rgba,
+    id: u32,
+    world: &dyn Fn(Position) -> DVec3,
+    foot: &dyn Fn(Position) -> DVec3,
+    chunks: &mut ChunkWriter,
+) {
+    let mut tris = Vec::with_capacity(pts.len() * 6);
+    for w in pts.windows(2) {
+        let (a, b) = (world(w[0]), world(w[1]));
+        let (fa, fb) = (foot(w[0]), foot(w[1]));
+        tris.extend_from_slice(&[fa, fb, b, fa, b, a]);
+    }
+    chunks.triangles(&tris, id, colour);
+}
+
+/// A tube of elliptic cross-section (`radius` across, `half_height` up) along a line, its
+/// rings swept round every turn in steps of at most [`CORRIDOR_JOINT_STEP_RAD`], so it stays
+/// round through sharp turns (where mitred rings would fold), closed at both ends.
+#[allow(clippy::too_many_arguments)]
+fn corridor(
+    pts: &[Position],
+    radius: f64,
+    half_height: f64,
+    colour: Rgba,
+    id: u32,
+    ellipsoid: &Ellipsoid,
+    world: &dyn Fn(Position) -> DVec3,
+    chunks: &mut ChunkWriter,
+) {
+    let centres: Vec<DVec3> = pts.iter().map(|&p| world(p)).collect();
+    let dirs: Vec<DVec3> = centres
+        .windows(2)
+        .filter_map(|w| (w[1] - w[0]).try_normalize())
+        .collect();
+    if dirs.is_empty() || centres.len() != dirs.len() + 1 {
+        return;
+    }
+    // Rings: (centre, direction) in order along the tube.
+    let mut rings: Vec<(DVec3, DVec3)> = Vec::new();
+    for (i, &c) in centres.iter().enumerate() {
+        let d_in = if i == 0 { dirs[0] } else { dirs[i - 1] };
+        let d_out = if i == dirs.len() { d_in } else { dirs[i] };
+        let turn = d_in.angle_between(d_out);
+        let steps = (turn / CORRIDOR_JOINT_STEP_RAD).ceil().max(1.0) as usize;
+        if turn < 1e-6 {
+            rings.push((c, d_in));
+            continue;
+        }
+        for k in 0..=steps {
+            let t = k as f64 / steps as f64;
+            let d = slerp(d_in, d_out, t);
+            rings.push((c, d));
+        }
+    }
+    let ring_points = |(c, d): (DVec3, DVec3)| -> Vec<DVec3> {
+        let up = ellipsoid.geodetic_normal(c).unwrap_or(DVec3::Z);
+        let side = d
+            .cross(up)
+            .try_normalize()
+            .unwrap_or_else(|| d.any_orthonormal_vector());
+        let vup = side.cross(d);
+        (0..CORRIDOR_SIDES)
+            .map(|k| {
+                let phi = std::f64::consts::TAU * k as f64 / CORRIDOR_SIDES as f64;
+                c + side * (radius * phi.cos()) + vup * (half_height * phi.sin())
+            })
+            .collect()
+    };
+    let all: Vec<Vec<DVec3>> = rings.iter().map(|&r| ring_points(r)).collect();
+    let mut tris = Vec::new();
+    for w in all.windows(2) {
+        for k in 0..CORRIDOR_SIDES {
+            let k2 = (k + 1) % CORRIDOR_SIDES;
+            let (a, b, c, d) = (w[0][k], w[0][k2], w[1][k2], w[1][k]);
+            tris.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    for (ring, (c, _)) in [
+        (&all[0], rings[0]),
+        (&all[all.len() - 1], rings[rings.len() - 1]),
+    ] {
+        for k in 0..CORRIDOR_SIDES {
+            tris.extend_from_slice(&[c, ring[k], ring[(k + 1) % CORRIDOR_SIDES]]);
+        }
+    }
+    chunks.triangles(&tris, id, colour);
+}
+
+/// Spherical interpolation between unit vectors.
+fn slerp(a: DVec3, b: DVec3, t: f64) -> DVec3 {
+    let angle = a.angle_between(b);
+    if angle < 1e-9 {
+        return a;
+    }
+    let s = angle.sin();
+    (a * ((1.0 - t) * angle).sin() / s + b * (t * angle).sin() / s).normalize_or(a)
+}
+
 /// A polygon at height `h`, in triangles of at most [`CAP_STEP_DEG`] a side.
 fn cap(
     rings: &[Vec<Position>],
@@ -525,5 +693,120 @@ impl TileDrape {
 
     pub(crate) fn is_empty(&self) -> bool {
         self.lines.is_empty() && self.fills.is_empty() && self.points.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Distance from `p` to the polyline `path`.
+    fn distance_to(path: &[DVec3], p: DVec3) -> f64 {
+        path.windows(2)
+            .map(|w| {
+                let d = w[1] - w[0];
+                let t = ((p - w[0]).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+                (w[0] + d * t - p).length()
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn a_corridor_keeps_its_radius_through_a_hairpin() {
+        let e = Ellipsoid::WGS84;
+        let world = |p: Position| {
+            e.cartographic_to_ecef(Cartographic::new(
+                p[0].to_radians(),
+                p[1].to_radians(),
+                p[2],
+            ))
+        };
+        // Out east, then back west-north-west: a 160 degree turn.
+        let pts = [
+            [7.0, 46.0, 3000.0],
+            [7.5, 46.0, 3000.0],
+            [7.0, 46.09, 3000.0],
+        ];
+        let radius = 5.0 * globus_vector::style::NAUTICAL_MILE_M;
+        let mut chunks = ChunkWriter::default();
+        corridor(
+            &pts,
+            radius,
+            radius,
+            Rgba([0, 255, 0, 100]),
+            1,
+            &e,
+            &world,
+            &mut chunks,
+        );
+        let path: Vec<DVec3> = pts.iter().map(|&p| world(p)).collect();
+        let chunks = chunks.finish();
+        let (mut n, mut outside_at_turn) = (0, 0.0f64);
+        for c in &chunks {
+            for v in &c.fills {
+                let p = c.origin
+                    + DVec3::new(
+                        f64::from(v.position[0]),
+                        f64::from(v.position[1]),
+                        f64::from(v.position[2]),
+                    );
+                let d = distance_to(&path, p);
+                // Never beyond the radius (a mitred joint would spike to r / cos(80 deg)).
+                assert!(
+                    d <= radius * 1.001,
+                    "a vertex {d:.0} m from the path, radius {radius:.0}"
+                );
+                if (p - path[1]).length() < radius * 1.5 {
+                    outside_at_turn = outside_at_turn.max(d);
+                }
+                n += 1;
+            }
+        }
+        // Round on the outside of the turn: the swept rings reach the full radius there.
+        assert!(
+            outside_at_turn > radius * 0.99,
+            "{outside_at_turn:.0} m round the turn"
+        );
+        assert!(n > 16 * 6 * 4, "{n} vertices");
+    }
+
+    #[test]
+    fn a_wall_reaches_from_the_line_to_the_ground() {
+        let e = Ellipsoid::WGS84;
+        let at = |p: Position, h: f64| {
+            e.cartographic_to_ecef(Cartographic::new(p[0].to_radians(), p[1].to_radians(), h))
+        };
+        let pts = [[7.0, 46.0, 3000.0], [7.1, 46.0, 3000.0]];
+        let mut chunks = ChunkWriter::default();
+        wall(
+            &pts,
+            Rgba([255, 0, 0, 100]),
+            1,
+            &|p| at(p, p[2]),
+            &|p| at(p, 500.0),
+            &mut chunks,
+        );
+        let chunks = chunks.finish();
+        let heights: Vec<f64> = chunks
+            .iter()
+            .flat_map(|c| {
+                c.fills.iter().map(move |v| {
+                    let p = c.origin
+                        + DVec3::new(
+                            f64::from(v.position[0]),
+                            f64::from(v.position[1]),
+                            f64::from(v.position[2]),
+                        );
+                    e.ecef_to_cartographic(p).map_or(f64::NAN, |c| c.height_m)
+                })
+            })
+            .collect();
+        assert_eq!(heights.len(), 6);
+        assert!(
+            heights
+                .iter()
+                .all(|h| (h - 3000.0).abs() < 0.1 || (h - 500.0).abs() < 0.1),
+            "{heights:?}"
+        );
     }
 }

@@ -217,7 +217,9 @@ impl VectorLayer {
     }
 
     /// Builds pending features; invalidates the draped pieces of tiles they touch.
-    fn build_pending(&mut self, ellipsoid: &Ellipsoid, exaggeration: f64) -> u32 {
+    fn build_pending(&mut self, frame: &FrameContext<'_>) -> u32 {
+        let (ellipsoid, exaggeration) = (frame.ellipsoid(), frame.exaggeration());
+        let ground = |lon: f64, lat: f64| frame.ground_height_m(lon.to_radians(), lat.to_radians());
         if self.built_for != Some((*ellipsoid, exaggeration)) {
             self.built_for = Some((*ellipsoid, exaggeration));
             self.pending = self.entries.keys().copied().collect();
@@ -242,7 +244,7 @@ impl VectorLayer {
             if e.built.is_some() {
                 continue;
             }
-            let b = build::build(&e.feature, pick, ellipsoid, exaggeration);
+            let b = build::build(&e.feature, pick, ellipsoid, exaggeration, &ground);
             self.invalid.extend(b.bbox);
             self.geometry_changed |= !b.chunks.is_empty();
             e.built = Some(b);
@@ -390,7 +392,7 @@ impl Overlay for VectorLayer {
         if self.gpu.is_none() {
             self.gpu = Some(Gpu::new(frame));
         }
-        let built = self.build_pending(frame.ellipsoid(), frame.exaggeration());
+        let built = self.build_pending(frame);
         let draped = self.drape_drawn(frame);
         let drawn_changed = frame.drawn_tiles().len() != self.last_drawn.len()
             || frame
