@@ -563,6 +563,26 @@ fn translucent_volumes_composite_in_any_order_hide_behind_terrain_and_show_from_
         })
         .count();
     assert!(both > 500, "only {both} pixels tinted by both volumes");
+    // Clicking a volume's face picks it.
+    off.render_complete(&view, TIMEOUT, &mut [&mut red_first])
+        .expect("render");
+    let (px, py) = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .find(|&(x, y)| {
+            differs(red_only.get(x, y), plain.get(x, y))
+                && !differs(a.get(x, y), red_only.get(x, y))
+        })
+        .expect("a pixel only the red volume covers");
+    let pick = off
+        .globe()
+        .pick(f64::from(px) + 0.5, f64::from(py) + 0.5)
+        .expect("pick")
+        .expect("in frame");
+    let picked = pick
+        .object()
+        .and_then(|o| red_first.feature_for_pick(o))
+        .map(|(_, f)| f.index);
+    assert_eq!(picked, Some(0), "clicking the red volume at ({px}, {py})");
     // A volume wholly under the ground (below any sea floor) is hidden by it.
     let mut buried = VectorLayer::new();
     buried.add(box_feature(

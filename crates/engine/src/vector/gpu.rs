@@ -230,6 +230,7 @@ pub(crate) struct Gpu {
     fill_draw_count: u32,
     oit_draws: Growing,
     oit_draw_count: u32,
+    volume_ids: wgpu::RenderPipeline,
     oit: Oit,
     bind_group: Option<(wgpu::BindGroup, [u64; 2], wgpu::TextureView)>,
     pub line_count: u32,
@@ -301,11 +302,17 @@ impl Gpu {
         let formats = frame.formats();
         let blend = Some(wgpu::BlendState::ALPHA_BLENDING);
         let targets = formats.colour_targets(blend, true);
+        // Ids only (colour untouched): volumes' faces, so picking finds them.
+        let mut id_targets = formats.colour_targets(None, true);
+        if let Some(c) = id_targets[0].as_mut() {
+            c.write_mask = wgpu::ColorWrites::empty();
+        }
         let pipeline = |label,
                         vs,
                         fs,
                         buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-                        depth: wgpu::DepthStencilState| {
+                        depth: wgpu::DepthStencilState,
+                        targets: &[Option<wgpu::ColorTargetState>]| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
@@ -322,7 +329,7 @@ impl Gpu {
                     module: &module,
                     entry_point: Some(fs),
                     compilation_options: Default::default(),
-                    targets: &targets,
+                    targets,
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -330,20 +337,37 @@ impl Gpu {
         };
         let fill_attrs =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32, 3 => Uint32];
+        let fill_buffers = [Some(wgpu::VertexBufferLayout {
+            array_stride: size_of::<FillVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &fill_attrs,
+        })];
         let fill = pipeline(
             "vector fills",
             "fill_vs",
             "fill_fs",
-            &[Some(wgpu::VertexBufferLayout {
-                array_stride: size_of::<FillVertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &fill_attrs,
-            })],
+            &fill_buffers,
             formats.depth_test(false),
+            &targets,
+        );
+        let volume_ids = pipeline(
+            "vector volume ids",
+            "fill_vs",
+            "fill_fs",
+            &fill_buffers,
+            formats.depth_test(false),
+            &id_targets,
         );
         let mut no_depth_test = formats.depth_test(false);
         no_depth_test.depth_compare = Some(wgpu::CompareFunction::Always);
-        let line = pipeline("vector lines", "line_vs", "line_fs", &[], no_depth_test);
+        let line = pipeline(
+            "vector lines",
+            "line_vs",
+            "line_fs",
+            &[],
+            no_depth_test,
+            &targets,
+        );
         let uniforms = buffer(
             device,
             "vector uniforms",
@@ -354,6 +378,7 @@ impl Gpu {
         let line_bytes = size_of::<LineInstance>() as u64;
         let fill_bytes = size_of::<FillVertex>() as u64;
         Self {
+            volume_ids,
             oit,
             oit_draws: Growing::new(
                 device,
@@ -650,8 +675,8 @@ impl Gpu {
         pass.multi_draw_indirect(&self.oit_draws.buffer, 0, self.oit_draw_count);
     }
 
-    /// Draws draped fills, the translucent geometry at altitude composited, then lines and
-    /// points: at most three draw calls.
+    /// Draws draped fills, the translucent geometry at altitude composited (and its ids),
+    /// then lines and points: at most four draw calls here, five with the accumulation.
     pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
         let Some((group, _, _)) = &self.bind_group else {
             return 0;
@@ -670,7 +695,11 @@ impl Gpu {
             pass.set_pipeline(&self.oit.composite);
             pass.set_bind_group(1, &t.group, &[]);
             pass.draw(0..3, 0..1);
-            calls += 1;
+            // Their ids (the last face drawn at a pixel wins; colour untouched).
+            pass.set_pipeline(&self.volume_ids);
+            pass.set_vertex_buffer(0, self.fills.buffer.slice(..));
+            pass.multi_draw_indirect(&self.oit_draws.buffer, 0, self.oit_draw_count);
+            calls += 2;
         }
         if self.line_draw_count > 0 {
             pass.set_pipeline(&self.line);
@@ -683,7 +712,7 @@ impl Gpu {
     /// Draw calls a frame makes: draped fills, the volumes' accumulation and composite, lines.
     pub(crate) fn draw_calls(&self) -> u32 {
         u32::from(self.fill_draw_count > 0)
-            + 2 * u32::from(self.oit_draw_count > 0)
+            + 3 * u32::from(self.oit_draw_count > 0)
             + u32::from(self.line_draw_count > 0)
     }
 
