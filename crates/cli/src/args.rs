@@ -243,21 +243,50 @@ pub enum GeoCommand {
     },
 }
 
-/// The vector layer of the `--vector` arguments (`None` without any): every file read,
-/// each bad feature a warning, a file that cannot be read or is not GeoJSON an error.
-pub fn vector_layer(specs: &[String]) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
-    if specs.is_empty() {
+/// The vector layer of the config file's `[[vector]]` tables and the `--vector` arguments
+/// (`None` without any): every file read, each bad feature a warning, a file that cannot be
+/// read or is not GeoJSON an error. The config's `[vector_style]` gives every file's
+/// defaults.
+pub fn vector_layer(a: &GlobeArgs) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
+    let config = a.config.as_deref().map(Config::load).transpose()?;
+    let defaults = match &config {
+        Some(c) => config::style_map(&c.vector_style, "vector_style")?,
+        None => serde_json::Map::new(),
+    };
+    let from_config = config.as_ref().map_or(0, |c| c.vector.len());
+    if a.vector.is_empty() && from_config == 0 {
         return Ok(None);
     }
     let mut layer = globus_engine::VectorLayer::new();
-    for spec in specs {
+    if let (Some(c), Some(path)) = (&config, &a.config) {
+        let base = path.parent().unwrap_or(Path::new("."));
+        for (i, v) in c.vector.iter().enumerate() {
+            let rules = globus_engine::StyleRules {
+                overrides: config::style_map(&v.style, &format!("vector[{i}].style"))?,
+                defaults: defaults.clone(),
+            };
+            let file = base.join(&v.file);
+            let (loaded, ids) = layer
+                .add_file(&file, &rules)
+                .with_context(|| format!("{}: vector[{i}]", path.display()))?;
+            tracing::info!(
+                "{}: {} of {} features drawn ({} warnings)",
+                file.display(),
+                ids.len(),
+                loaded.read,
+                loaded.warning_count
+            );
+        }
+    }
+    for spec in &a.vector {
         // A file whose name holds '#' is taken whole when it exists.
         let (file, fragment) = match spec.rsplit_once('#') {
             Some((f, frag)) if !Path::new(spec).exists() => (f, frag),
             _ => (spec.as_str(), ""),
         };
-        let rules = globus_engine::StyleRules::from_fragment(fragment)
+        let mut rules = globus_engine::StyleRules::from_fragment(fragment)
             .map_err(|e| anyhow::anyhow!("--vector {spec}: {e}"))?;
+        rules.defaults = defaults.clone();
         let (loaded, ids) = layer
             .add_file(Path::new(file), &rules)
             .with_context(|| format!("--vector {spec}"))?;

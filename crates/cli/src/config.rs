@@ -31,6 +31,14 @@
 //! url = "https://{s}.imagery.example/{z}/{x}/{y}.jpg"
 //! subdomains = ["a", "b", "c"]
 //! maxzoom = 19
+//!
+//! [vector_style]          # defaults for features without these properties
+//! stroke = "#ffcc00"
+//! stroke-width = 2
+//!
+//! [[vector]]              # drawn like --vector (paths relative to this file)
+//! file = "countries.geojson"
+//! style = { fill-opacity = 0.3 }   # overrides, like FILE#key=value
 //! ```
 
 use std::collections::BTreeMap;
@@ -75,6 +83,41 @@ pub struct Config {
     /// Imagery layers, bottom first.
     #[serde(default)]
     pub imagery: Vec<SourceSpec>,
+    /// Style defaults of vector features (simplestyle keys and Globus's own).
+    #[serde(default)]
+    pub vector_style: BTreeMap<String, toml::Value>,
+    /// Vector files drawn.
+    #[serde(default)]
+    pub vector: Vec<VectorConfig>,
+}
+
+/// A `[[vector]]` table.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VectorConfig {
+    /// The GeoJSON file (relative to the config file).
+    pub file: std::path::PathBuf,
+    /// Style overrides.
+    #[serde(default)]
+    pub style: BTreeMap<String, toml::Value>,
+}
+
+/// Style keys and values of a config table as JSON, each key checked.
+pub fn style_map(
+    table: &BTreeMap<String, toml::Value>,
+    what: &str,
+) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
+    let mut out = serde_json::Map::new();
+    for (k, v) in table {
+        if !globus_vector::style::KEYS.contains(&k.as_str()) {
+            bail!(
+                "{what}: `{k}` is not a style key (one of {})",
+                globus_vector::style::KEYS.join(", ")
+            );
+        }
+        out.insert(k.clone(), serde_json::to_value(v)?);
+    }
+    Ok(out)
 }
 
 /// The `[http]` table.
@@ -160,6 +203,10 @@ impl Config {
     }
 
     fn check(&self) -> anyhow::Result<()> {
+        style_map(&self.vector_style, "vector_style")?;
+        for (i, v) in self.vector.iter().enumerate() {
+            style_map(&v.style, &format!("vector[{i}].style"))?;
+        }
         if let Some(d) = &self.disk_cache
             && let Some(mb) = d.max_mb
             && mb > MAX_DISK_CACHE_MB

@@ -206,6 +206,6 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         width,
         height,
         exit_after: a.exit_after.map(Duration::from_secs_f64),
-        vectors: a.globe.vector.clone(),
+        vectors: args::vector_layer(&a.globe)?,
     })
 }

@@ -32,7 +32,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         args::check_writable(s)?;
     }
-    let mut vectors = args::vector_layer(&a.globe.vector)?;
+    let mut vectors = args::vector_layer(&a.globe)?;
     let mut off = Headless::new(&builder, width, height)?;
     let timeout = Duration::from_secs_f64(a.timeout_s);
     let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);

@@ -27,7 +27,6 @@ use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 /// Settings of the viewer.
-#[derive(Clone, Debug)]
 pub struct ViewerOptions {
     /// The globe.
     pub globe: GlobeBuilder,
@@ -41,8 +40,8 @@ pub struct ViewerOptions {
     pub height: u32,
     /// Close the window after this long (for automated checks).
     pub exit_after: Option<Duration>,
-    /// `--vector` arguments (see [`crate::args::vector_layer`]).
-    pub vectors: Vec<String>,
+    /// The vector data to draw (see [`crate::args::vector_layer`]).
+    pub vectors: Option<VectorLayer>,
 }
 
 /// Seconds a fly-to takes.
@@ -63,7 +62,7 @@ pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
     })?;
     // Sources first: one that cannot be opened fails before a window opens.
     options.globe.open_sources()?;
-    let vectors = crate::args::vector_layer(&options.vectors)?;
+    let vectors = options.vectors.take();
     let mut app = App {
         vectors,
         options,

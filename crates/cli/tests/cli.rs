@@ -417,3 +417,103 @@ fn imagery_failures_are_reported_per_layer() {
     assert!(server.count("/") > 0);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn render_draws_vector_files_from_the_command_line_and_the_config() {
+    let dir = common::scratch("cli", "vector");
+    let line = dir.join("line.geojson");
+    std::fs::write(
+        &line,
+        r#"{"type": "FeatureCollection", "features": [
+            {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": [[-130, 0], [-110, 20]]}},
+            {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 1]]]}}
+        ]}"#,
+    )
+    .unwrap();
+    let other = dir.join("other.geojson");
+    std::fs::write(
+        &other,
+        r#"{"type": "LineString", "coordinates": [[-135, -15], [-115, -5]]}"#,
+    )
+    .unwrap();
+    let config = dir.join("globus.toml");
+    std::fs::write(
+        &config,
+        "[vector_style]\nstroke = \"#ff00ff\"\nstroke-width = 6\n\n[[vector]]\nfile = \"line.geojson\"\nstyle = { stroke-opacity = 1 }\n",
+    )
+    .unwrap();
+    let png = dir.join("v.png");
+    let stats = dir.join("v.json");
+    let out = globus(&[
+        "render",
+        "--camera",
+        "-120,10,20000000,0,-90",
+        "--size",
+        "160x120",
+        "--out",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--vector",
+        &format!("{}#stroke=%2300ff00", other.display()),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    // The unclosed ring is one warning naming the file and feature.
+    assert_eq!(
+        stderr
+            .matches("line.geojson: feature 1: exterior ring: an unclosed ring")
+            .count(),
+        1,
+        "{stderr}"
+    );
+    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    assert_eq!(s["vector"]["features"], 2, "{s}");
+    assert!(s["vector"]["line_instances"].as_u64().unwrap() > 0, "{s}");
+    // The config's line is magenta (its defaults), the command line's green (its override).
+    let img = image::open(&png).expect("a PNG").to_rgba8();
+    let (mut magenta, mut green) = (0, 0);
+    for p in img.pixels() {
+        let [r, g, b, _] = p.0;
+        magenta += usize::from(r > 200 && g < 80 && b > 200);
+        green += usize::from(g > 200 && r < 80 && b < 80);
+    }
+    assert!(
+        magenta > 5 && green > 5,
+        "magenta {magenta}, green {green} pixels"
+    );
+    // Bad style keys and files that are not GeoJSON are one line each.
+    std::fs::write(&config, "[vector_style]\nstrokes = 1\n").unwrap();
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1e7,0,-90",
+            "--size",
+            "8x8",
+            "--out",
+            png.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+        ],
+        &["vector_style", "`strokes` is not a style key"],
+    );
+    let csv = dir.join("airports.csv");
+    std::fs::write(&csv, "icao,lat,lon\n").unwrap();
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1e7,0,-90",
+            "--size",
+            "8x8",
+            "--out",
+            png.to_str().unwrap(),
+            "--vector",
+            csv.to_str().unwrap(),
+        ],
+        &["airports.csv", "not GeoJSON"],
+    );
+}
