@@ -214,6 +214,13 @@ fn read_object(
                 stopped: Some(format!("after feature {}: {e}", features - 1)),
             });
         }
+        // A read error (the size cap among them) is not a statement about the format.
+        Err(e) if e.is_io() => {
+            return Err(ReadError::Io {
+                path: path.to_owned(),
+                source: std::io::Error::other(e.to_string()),
+            });
+        }
         Err(e) => return Err(not_geojson(path, &format!("{e}"))),
     };
     if let Err(e) = de.end() {
@@ -471,8 +478,9 @@ mod tests {
         text.extend_from_slice(b"[1, 2]]}}]}");
         let e = read_all(&text).err();
         assert!(
-            e.as_ref()
-                .is_some_and(|e| e.to_string().contains("larger than 16 MiB")),
+            matches!(&e, Some(ReadError::Io { .. }))
+                && e.as_ref()
+                    .is_some_and(|e| e.to_string().contains("larger than 16 MiB")),
             "{e:?}"
         );
     }
