@@ -624,3 +624,83 @@ fn translucent_volumes_composite_in_any_order_hide_behind_terrain_and_show_from_
         share * 100.0
     );
 }
+
+#[test]
+fn a_draped_fill_over_mountains_covers_what_the_cpu_projects_with_no_seams_between_levels() {
+    let (w, h) = (480u32, 320u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let (west, south, east, north) = (7.0, 45.6, 8.6, 46.6);
+    let text = format!(
+        r##"{{"type": "Feature", "properties": {{"fill": "#00ff00", "fill-opacity": 1, "stroke-width": 0}},
+            "geometry": {{"type": "Polygon", "coordinates": [[[{west}, {south}], [{east}, {south}], [{east}, {north}], [{west}, {north}], [{west}, {south}]]]}}}}"##
+    );
+    let f: geojson::Feature = text.parse().expect("feature");
+    let mut warnings = Vec::new();
+    let mut layer = VectorLayer::new();
+    layer.add(
+        globus_vector::from_geojson(0, f, &StyleRules::default(), &mut warnings).expect("drawable"),
+    );
+    // Low over the Alps of the procedural planet, looking north across the box: tiles of
+    // many levels meet inside it.
+    let cam = common::camera(7.8, 45.75, 3_000.0, 0.0, -15.0, true);
+    let mut view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
+    view = cam.view(off.globe(), 60.0, w, h);
+    let (img, bg) = with_and_without(&mut off, &view, &mut layer, "fill_over_mountains");
+    let globe = off.globe();
+    let levels: std::collections::BTreeSet<u8> =
+        globe.drawn_tiles().iter().map(|d| d.key.level()).collect();
+    let e = globe.ellipsoid();
+    let mut expected = vec![None; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            let Some(hit) = globe.ray_pick(view.position, dir) else {
+                continue;
+            };
+            let Some(c) = e.ecef_to_cartographic(hit) else {
+                continue;
+            };
+            let (lon, lat) = (c.lon_deg(), c.lat_deg());
+            expected[(y * w + x) as usize] =
+                Some(lon > west && lon < east && lat > south && lat < north);
+        }
+    }
+    let at = |x: i64, y: i64| -> Option<bool> {
+        if x < 0 || y < 0 || x >= i64::from(w) || y >= i64::from(h) {
+            return None;
+        }
+        expected[(y as u32 * w + x as u32) as usize]
+    };
+    let (mut checked, mut wrong, mut inside) = (0usize, 0usize, 0usize);
+    for y in 0..i64::from(h) {
+        for x in 0..i64::from(w) {
+            let Some(want) = at(x, y) else { continue };
+            // Within 1 px of the edge, or of a silhouette, either answer is right.
+            let edge = (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy) != Some(want)));
+            if edge {
+                continue;
+            }
+            let c = coverage(&img, &bg, x, y, [0.0, 255.0, 0.0]);
+            if c.is_nan() {
+                continue;
+            }
+            checked += 1;
+            inside += usize::from(want);
+            wrong += usize::from((c > 0.5) != want);
+        }
+    }
+    let share = wrong as f64 / checked.max(1) as f64;
+    eprintln!(
+        "fill over mountains: levels {levels:?}, {wrong} of {checked} pixels differ ({:.3} %), {inside} inside",
+        share * 100.0
+    );
+    assert!(levels.len() >= 3, "only levels {levels:?} drawn");
+    assert!(inside > 20_000, "{inside} pixels inside");
+    // Without the skirts draped, 45 pixels of seams showed where levels meet.
+    assert!(
+        wrong <= 10,
+        "{wrong} of {checked} pixels differ from the CPU projection"
+    );
+}

@@ -35,6 +35,9 @@ pub struct DrapeSurface {
     positions: Vec<DVec3>,
     triangles: Vec<[u32; 3]>,
     cells: Vec<Vec<u32>>,
+    /// Skirt walls under the tile's edges: top vertices (on the edge) and the skirt vertices
+    /// under them.
+    skirts: Vec<[u32; 4]>,
 }
 
 impl DrapeSurface {
@@ -69,7 +72,21 @@ impl DrapeSurface {
             positions,
             triangles,
             cells,
+            skirts: Vec::new(),
         }
+    }
+
+    /// Adds the tile's skirt walls (`[top0, top1, bottom0, bottom1]`: two vertices on an
+    /// edge and the skirt vertices hanging under them), so draped fills cover them too and
+    /// leave no seam where a coarser neighbour's edge lies lower. Walls with an index out of
+    /// range are dropped.
+    pub fn with_skirts(mut self, skirts: Vec<[u32; 4]>) -> Self {
+        let n = self.uv.len().min(self.positions.len()) as u32;
+        self.skirts = skirts
+            .into_iter()
+            .filter(|q| q.iter().all(|&i| i < n))
+            .collect();
+        self
     }
 
     /// Surface triangles.
@@ -158,6 +175,7 @@ impl DrapeSurface {
             [(t[0], t[2]), (t[2], t[1]), (t[1], t[0])]
         };
         let inside = |p: [f64; 2]| planes.iter().all(|&(a, b)| cross(a, b, p) >= 0.0);
+        self.drape_skirts(t, lo, hi, out);
         let (i0, j0, i1, j1) = cell_span(lo, hi);
         let mut seen = vec![false; self.triangles.len()];
         let mut poly = Vec::with_capacity(9);
@@ -196,6 +214,31 @@ impl DrapeSurface {
                     }
                 }
             }
+        }
+    }
+
+    /// Appends the parts of the skirt walls under the fill triangle `t` (in u, v).
+    fn drape_skirts(
+        &self,
+        t: [[f64; 2]; 3],
+        lo: [f64; 2],
+        hi: [f64; 2],
+        out: &mut Vec<[DVec3; 3]>,
+    ) {
+        for &[a, b, sa, sb] in &self.skirts {
+            let (ua, ub) = (self.uv[a as usize], self.uv[b as usize]);
+            let [slo, shi] = bbox([ua, ub, ub]);
+            if shi[0] < lo[0] || shi[1] < lo[1] || slo[0] > hi[0] || slo[1] > hi[1] {
+                continue;
+            }
+            let Some((t0, t1)) = segment_in_triangle(ua, ub, t, 0.0, 1.0) else {
+                continue;
+            };
+            let p = |i: u32| self.positions[i as usize];
+            let (top0, top1) = (p(a).lerp(p(b), t0), p(a).lerp(p(b), t1));
+            let (bot0, bot1) = (p(sa).lerp(p(sb), t0), p(sa).lerp(p(sb), t1));
+            out.push([top0, top1, bot0]);
+            out.push([top1, bot1, bot0]);
         }
     }
 
@@ -435,6 +478,33 @@ mod tests {
         out.clear();
         s.drape_triangle([[0.0, 40.0], [40.0, 40.0], [0.0, 80.0]], 0.0, &mut out);
         assert_eq!(out.len(), s.triangle_count());
+    }
+
+    #[test]
+    fn fills_cover_the_skirt_walls_under_them() {
+        let (s, _) = surface();
+        // A skirt under the north edge (v = 0) between its first two vertices, 100 m deep.
+        let n = s.uv.len() as u32;
+        let mut s = s;
+        s.uv.push(s.uv[0]);
+        s.uv.push(s.uv[1]);
+        s.positions.push(s.positions[0] - DVec3::Z * 100.0);
+        s.positions.push(s.positions[1] - DVec3::Z * 100.0);
+        let plain = s.clone();
+        let s = s.with_skirts(vec![[0, 1, n, n + 1]]);
+        // A fill over the west half of that edge piece (u 0 .. 0.125) and beyond the tile.
+        let fill = [[9.0, 52.0], [10.125, 52.0], [10.125, 50.5]];
+        let (mut out, mut without) = (Vec::new(), Vec::new());
+        s.drape_triangle(fill, 0.0, &mut out);
+        plain.drape_triangle(fill, 0.0, &mut without);
+        let walls: Vec<&[DVec3; 3]> = out.iter().filter(|t| !without.contains(t)).collect();
+        assert_eq!(walls.len(), 2, "{walls:?}");
+        let area: f64 = walls
+            .iter()
+            .map(|t| ((t[1] - t[0]).cross(t[2] - t[0])).length() / 2.0)
+            .sum();
+        // 125 m of edge (of 250) by 100 m.
+        assert!((area - 125.0 * 100.0).abs() < 1.0, "{area}");
     }
 
     #[test]

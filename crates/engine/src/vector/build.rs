@@ -588,25 +588,27 @@ impl ChunkWriter {
     }
 }
 
-/// The drape surface of a tile's mesh (its surface triangles, positions relative to its
-/// centre).
+/// The drape surface of a tile's mesh: its surface triangles and skirt walls, positions
+/// relative to its centre.
 pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
+    let surface_count = mesh.surface_triangles as usize;
     let surface_vertices = mesh
         .indices
         .iter()
-        .take(mesh.surface_triangles as usize * 3)
+        .take(surface_count * 3)
         .copied()
         .max()
         .map_or(0, |m| m as usize + 1);
-    let verts = &mesh.vertices[..surface_vertices.min(mesh.vertices.len())];
-    let uv = verts
+    let uv = mesh
+        .vertices
         .iter()
         .map(|v| {
             let (u, w) = (v.uv & 0xffff, v.uv >> 16);
             [f64::from(u) / 65535.0, f64::from(w) / 65535.0]
         })
         .collect();
-    let positions = verts
+    let positions = mesh
+        .vertices
         .iter()
         .map(|v| {
             DVec3::new(
@@ -619,10 +621,37 @@ pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
     let triangles = mesh
         .indices
         .chunks_exact(3)
-        .take(mesh.surface_triangles as usize)
+        .take(surface_count)
         .map(|t| [t[0], t[1], t[2]])
         .collect();
-    DrapeSurface::new(rect_deg, uv, positions, triangles)
+    // Skirt walls are pairs of triangles over two edge vertices and the two skirt vertices
+    // under them (same uv).
+    let is_top = |i: u32| (i as usize) < surface_vertices;
+    let skirts = mesh.indices[(surface_count * 3).min(mesh.indices.len())..]
+        .chunks_exact(6)
+        .filter_map(|q| {
+            let mut top: Vec<u32> = q.iter().copied().filter(|&i| is_top(i)).collect();
+            let mut bottom: Vec<u32> = q.iter().copied().filter(|&i| !is_top(i)).collect();
+            top.sort_unstable();
+            top.dedup();
+            bottom.sort_unstable();
+            bottom.dedup();
+            let [a, b] = top[..] else { return None };
+            let [s0, s1] = bottom[..] else { return None };
+            let uv_of = |i: u32| mesh.vertices.get(i as usize).map(|v| v.uv);
+            let under = |t: u32| {
+                if uv_of(s0) == uv_of(t) {
+                    Some(s0)
+                } else if uv_of(s1) == uv_of(t) {
+                    Some(s1)
+                } else {
+                    None
+                }
+            };
+            Some([a, b, under(a)?, under(b)?])
+        })
+        .collect();
+    DrapeSurface::new(rect_deg, uv, positions, triangles).with_skirts(skirts)
 }
 
 /// Instances one tile draws for the draped geometry of `features` (id, draped part), at
