@@ -468,6 +468,38 @@ fn updates_cost_what_changed_and_an_unchanged_frame_rebuilds_nothing() {
         "{:?}",
         gone.get(x, y)
     );
+    // A draped line: recoloured in the tiles already draped (only that feature redraped).
+    let line = |colour: &str| {
+        let text = format!(
+            r##"{{"type": "Feature", "properties": {{"stroke": "{colour}", "stroke-width": 5}},
+                "geometry": {{"type": "LineString", "coordinates": [[7.0, 46.25], [7.9, 46.25]]}}}}"##
+        );
+        let f: geojson::Feature = text.parse().expect("feature");
+        let mut w = Vec::new();
+        globus_vector::from_geojson(0, f, &StyleRules::default(), &mut w).expect("drawable")
+    };
+    let id = layer.add(line("#ff00ff"));
+    let drawn = frame(&mut off, &mut layer);
+    let globe = off.globe();
+    let (lon, lat) = (7.45f64.to_radians(), 46.25f64.to_radians());
+    let on_ground =
+        globe.world_position(Cartographic::new(lon, lat, globe.ground_height_m(lon, lat)));
+    let q = camera.project(on_ground).expect("in view");
+    let (lx, ly) = (q.x as u32, q.y as u32);
+    let magenta = drawn.get(lx, ly);
+    assert!(
+        magenta[0] > 200 && magenta[1] < 80 && magenta[2] > 200,
+        "{magenta:?}"
+    );
+    assert!(layer.update(id, line("#00ffff")));
+    let recoloured = frame(&mut off, &mut layer);
+    let cyan = recoloured.get(lx, ly);
+    assert!(cyan[0] < 80 && cyan[1] > 200 && cyan[2] > 200, "{cyan:?}");
+    assert_eq!(
+        layer.stats().tiles_draped,
+        0,
+        "tiles were redraped, not draped anew"
+    );
 }
 
 fn box_feature(

@@ -199,7 +199,11 @@ pub fn densify(
     for i in 0..segments {
         let (a, b) = (pts[i], pts[(i + 1) % n]);
         out.push(a);
-        curve.split(a, b, 0, &mut out);
+        if path == PathKind::Geodesic && straight == Straight::Chord {
+            curve.sample_geodesic(a, b, &mut out);
+        } else {
+            curve.split(a, b, 0, &mut out);
+        }
     }
     if !closed && let Some(&last) = pts.last() {
         out.push(last);
@@ -216,6 +220,31 @@ struct Curve<'a> {
 }
 
 impl Curve<'_> {
+    /// Pushes the interior points of a..b (not a, not b) for 3D chords along a geodesic:
+    /// evenly spaced, as far apart as a chord may be whose sagitta under the tightest
+    /// curvature of the body (1 / its smallest radius of curvature, b^2 / a) is within the
+    /// tolerance. One inverse and one direct problem per point, where halving needs two
+    /// per split.
+    fn sample_geodesic(&self, a: Position, b: Position, out: &mut Vec<Position>) {
+        let (s12, azi1, _azi2, _a12): (f64, f64, f64, f64) =
+            self.geodesic.inverse(a[1], a[0], b[1], b[0]);
+        if !s12.is_finite() || s12 <= 0.0 {
+            return;
+        }
+        let r = self.ellipsoid.radii();
+        let min_radius = r.z * r.z / r.x + a[2].min(b[2]).max(0.0);
+        let step = 0.95 * (8.0 * min_radius * self.tolerance_m).sqrt();
+        let pieces = (s12 / step).ceil().min(f64::from(1u32 << MAX_SPLIT_DEPTH)) as u32;
+        let mut lon_prev = a[0];
+        for k in 1..pieces {
+            let t = f64::from(k) / f64::from(pieces);
+            let (lat, lon): (f64, f64) = self.geodesic.direct(a[1], a[0], azi1, s12 * t);
+            let lon = unwrap_near(lon, lon_prev);
+            lon_prev = lon;
+            out.push([lon, lat, a[2] + (b[2] - a[2]) * t]);
+        }
+    }
+
     /// Pushes the interior points of a..b (not a, not b).
     fn split(&self, a: Position, b: Position, depth: u32, out: &mut Vec<Position>) {
         if depth >= MAX_SPLIT_DEPTH {

@@ -720,6 +720,13 @@ impl TileDrape {
         }
     }
 
+    /// Drops the pieces of the features with these pick ids.
+    pub(crate) fn retain_not(&mut self, picks: &[u32]) {
+        self.lines.retain(|l| !picks.contains(&l.id));
+        self.points.retain(|l| !picks.contains(&l.id));
+        self.fills.retain(|f| !picks.contains(&f.id));
+    }
+
     pub(crate) fn is_empty(&self) -> bool {
         self.lines.is_empty() && self.fills.is_empty() && self.points.is_empty()
     }

@@ -79,7 +79,9 @@ pub struct VectorLayer {
     next_id: u32,
     entries: FxHashMap<u32, Entry>,
     pending: Vec<u32>,
-    invalid: Vec<Bbox>,
+    /// Features whose draped pieces changed, with the bounds they had and have: the cached
+    /// tiles under them redrape those features alone.
+    changed: Vec<(u32, Bbox)>,
     built_for: Option<(Ellipsoid, f64)>,
     tiles: FxHashMap<TileKey, CachedTile>,
     frame: u64,
@@ -111,7 +113,7 @@ impl VectorLayer {
             next_id: 0,
             entries: FxHashMap::default(),
             pending: Vec::new(),
-            invalid: Vec::new(),
+            changed: Vec::new(),
             built_for: None,
             tiles: FxHashMap::default(),
             frame: 0,
@@ -161,7 +163,7 @@ impl VectorLayer {
             return false;
         };
         if let Some(b) = e.built.take() {
-            self.invalid.extend(b.bbox);
+            self.changed.extend(b.bbox.map(|bb| (id.0, bb)));
             self.geometry_changed |= !b.chunks.is_empty();
             self.released
                 .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id.0, i)));
@@ -177,7 +179,7 @@ impl VectorLayer {
             return false;
         };
         if let Some(b) = e.built {
-            self.invalid.extend(b.bbox);
+            self.changed.extend(b.bbox.map(|bb| (id.0, bb)));
             self.geometry_changed |= !b.chunks.is_empty();
             self.released
                 .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id.0, i)));
@@ -245,23 +247,61 @@ impl VectorLayer {
                 continue;
             }
             let b = build::build(&e.feature, pick, ellipsoid, exaggeration, &ground);
-            self.invalid.extend(b.bbox);
+            self.changed.extend(b.bbox.map(|bb| (id, bb)));
             self.geometry_changed |= !b.chunks.is_empty();
             e.built = Some(b);
             built += 1;
         }
-        if !self.invalid.is_empty() {
-            let invalid = std::mem::take(&mut self.invalid);
-            let released = &mut self.released;
-            self.tiles.retain(|&key, t| {
-                let keep = !invalid.iter().any(|b| b.overlaps(t.rect));
-                if !keep {
-                    released.push(EntryKey::Tile(key));
-                }
-                keep
-            });
+        if !self.changed.is_empty() {
+            self.redrape_changed(frame);
         }
         built
+    }
+
+    /// Redrapes, in the drawn tiles under them, only the features that changed (their old
+    /// pieces dropped, their new ones added); other cached tiles under them are dropped
+    /// whole (draped again if drawn again).
+    fn redrape_changed(&mut self, frame: &FrameContext<'_>) {
+        let mut boxes: FxHashMap<u32, Vec<Bbox>> = FxHashMap::default();
+        for (id, b) in self.changed.drain(..) {
+            boxes.entry(id).or_default().push(b);
+        }
+        let drawn: rustc_hash::FxHashSet<TileKey> =
+            frame.drawn_tiles().iter().map(|d| d.key).collect();
+        let mut dropped = Vec::new();
+        for (&key, tile) in &mut self.tiles {
+            let touching: Vec<u32> = boxes
+                .iter()
+                .filter(|(_, bs)| bs.iter().any(|b| b.overlaps(tile.rect)))
+                .map(|(&id, _)| id)
+                .collect();
+            if touching.is_empty() {
+                continue;
+            }
+            let Some(mesh) = frame.tile_mesh(key).filter(|_| drawn.contains(&key)) else {
+                dropped.push(key);
+                continue;
+            };
+            let picks: Vec<u32> = touching
+                .iter()
+                .map(|&id| self.pick_base.saturating_add(id))
+                .collect();
+            tile.drape.retain_not(&picks);
+            let surface = build::surface(mesh, tile.rect);
+            for &id in &touching {
+                if let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref())
+                    && b.bbox.is_some_and(|bb| bb.overlaps(tile.rect))
+                {
+                    tile.drape
+                        .add(&surface, self.pick_base.saturating_add(id), &b.draped);
+                }
+            }
+            self.released.push(EntryKey::Tile(key));
+        }
+        for key in dropped {
+            self.tiles.remove(&key);
+            self.released.push(EntryKey::Tile(key));
+        }
     }
 
     /// Drapes every drawn tile that has no pieces yet; whether any was draped.
