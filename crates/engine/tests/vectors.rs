@@ -736,3 +736,72 @@ fn a_draped_fill_over_mountains_covers_what_the_cpu_projects_with_no_seams_betwe
         "{wrong} of {checked} pixels differ from the CPU projection"
     );
 }
+
+#[test]
+fn a_point_can_be_drawn_as_an_icon_from_a_png() {
+    let dir = common::scratch("vectors", "icon");
+    let icon = dir.join("icon.png");
+    let mut img = image::RgbaImage::new(16, 16);
+    for (x, _, p) in img.enumerate_pixels_mut() {
+        *p = if x < 8 {
+            image::Rgba([255, 0, 0, 255])
+        } else {
+            image::Rgba([0, 0, 255, 255])
+        };
+    }
+    img.save(&icon).expect("icon");
+    let text = format!(
+        r##"{{"type": "FeatureCollection", "features": [
+            {{"type": "Feature", "properties": {{"marker-icon": "{}", "marker-size": 32, "clamp": "absolute"}},
+              "geometry": {{"type": "Point", "coordinates": [7.5, 46.5, 20000]}}}},
+            {{"type": "Feature", "properties": {{"marker-icon": "{}", "marker-color": "#00ff00", "marker-size": 20, "clamp": "absolute"}},
+              "geometry": {{"type": "Point", "coordinates": [7.9, 46.5, 20000]}}}}]}}"##,
+        icon.display(),
+        dir.join("missing.png").display()
+    );
+    let file = write_geojson(&dir, "icons.geojson", &text);
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let mut layer = VectorLayer::new();
+    layer
+        .add_file(&file, &StyleRules::default())
+        .expect("icons");
+    let cam = common::camera(7.7, 46.5, 300_000.0, 0.0, -90.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [&mut layer])
+        .expect("render");
+    save_png(
+        &frame.image,
+        &globus_test_support::output_dir("vectors").join("icons.png"),
+    )
+    .expect("save");
+    let globe = off.globe();
+    let camera = *globe.camera().expect("camera");
+    let px = |lon: f64| {
+        let p = globe.world_position(Cartographic::new(
+            lon.to_radians(),
+            46.5f64.to_radians(),
+            20_000.0,
+        ));
+        camera.project(p).expect("in view")
+    };
+    let at = px(7.5);
+    let (x, y) = (at.x as u32, at.y as u32);
+    let (left, right) = (frame.image.get(x - 8, y), frame.image.get(x + 8, y));
+    assert!(
+        left[0] > 200 && left[2] < 60,
+        "left half of the icon: {left:?}"
+    );
+    assert!(
+        right[2] > 200 && right[0] < 60,
+        "right half of the icon: {right:?}"
+    );
+    // An icon that cannot be read: the point is drawn as its symbol (warned about).
+    let fallback = px(7.9);
+    let c = frame.image.get(fallback.x as u32, fallback.y as u32);
+    assert!(
+        c[1] > 200 && c[0] < 60 && c[2] < 60,
+        "fallback symbol: {c:?}"
+    );
+}

@@ -85,6 +85,9 @@ pub struct Style {
     pub marker_size_px: f32,
     /// Point symbol shape.
     pub marker_square: bool,
+    /// A PNG drawn as the point's symbol (`marker-size` pixels a side), instead of the
+    /// circle or square.
+    pub marker_icon: Option<String>,
     /// Point outline colour.
     pub marker_outline: Rgba,
     /// How heights are measured.
@@ -110,6 +113,7 @@ impl Default for Style {
             marker_color: Rgba([0x7e, 0x7e, 0x7e, 255]),
             marker_size_px: 12.0,
             marker_square: false,
+            marker_icon: None,
             marker_outline: Rgba([255, 255, 255, 255]),
             clamp: Clamp::Ground,
             path: PathKind::Geodesic,
@@ -250,6 +254,12 @@ impl StyleRules {
         if let Some(v) = get("marker-symbol") {
             style.marker_square = matches!(v.as_str(), Some("square"));
         }
+        if let Some(v) = get("marker-icon") {
+            match v.as_str().filter(|p| !p.is_empty()) {
+                Some(p) => style.marker_icon = Some(p.to_owned()),
+                None => bad("marker-icon", v),
+            }
+        }
         if let Some(v) = get("stroke-opacity") {
             match number(v).filter(|o| (0.0..=1.0).contains(o)) {
                 Some(o) => style.stroke = style.stroke.with_opacity(o),
@@ -388,6 +398,7 @@ pub const KEYS: &[&str] = &[
     "marker-size",
     "marker-symbol",
     "marker-outline",
+    "marker-icon",
     "extrude",
     "lower",
     "upper",

@@ -63,6 +63,8 @@ pub(crate) struct DrapedPoint {
     pub outline: Rgba,
     pub size_px: f32,
     pub square: bool,
+    /// Icon layer plus one (0: the symbol).
+    pub icon: u32,
 }
 
 /// Longitude/latitude bounds, degrees (longitudes unwrapped).
@@ -122,13 +124,15 @@ pub(crate) struct Built {
 }
 
 /// Builds a feature's geometry for a body and exaggeration; `ground_m(lon_deg, lat_deg)` is
-/// the terrain's height (true metres) where heights are relative to it and walls end.
+/// the terrain's height (true metres) where heights are relative to it and walls end;
+/// `icon_of(path)` the icon layer plus one of a PNG (0 if it cannot be drawn).
 pub(crate) fn build(
     feature: &Feature,
     id: u32,
     ellipsoid: &Ellipsoid,
     exaggeration: f64,
     ground_m: &dyn Fn(f64, f64) -> f64,
+    icon_of: &mut dyn FnMut(&str) -> u32,
 ) -> Built {
     let style = &feature.style;
     let mut out = Built::default();
@@ -296,6 +300,9 @@ pub(crate) fn build(
             }
         }
     }
+    let icon = style.marker_icon.as_deref().map_or(0, icon_of);
+    // An icon fills the symbol's square.
+    let square = style.marker_square || icon != 0;
     for &p in &feature.points {
         let (colour, outline, size) = (
             style.marker_color,
@@ -308,10 +315,11 @@ pub(crate) fn build(
                 colour,
                 outline,
                 size_px: size,
-                square: style.marker_square,
+                square,
+                icon,
             });
         } else {
-            chunks.point(world(p), id, colour, outline, size, style.marker_square);
+            chunks.point(world(p), id, colour, outline, size, square, icon);
         }
     }
     let d = &out.draped;
@@ -559,17 +567,30 @@ impl ChunkWriter {
         }
     }
 
-    fn point(&mut self, p: DVec3, id: u32, colour: Rgba, outline: Rgba, size: f32, square: bool) {
+    #[allow(clippy::too_many_arguments)]
+    fn point(
+        &mut self,
+        p: DVec3,
+        id: u32,
+        colour: Rgba,
+        outline: Rgba,
+        size: f32,
+        square: bool,
+        icon: u32,
+    ) {
         let c = self.chunk_for(p);
-        c.lines.push(LineInstance::point(
-            p - c.origin,
-            id,
-            colour,
-            outline,
-            size,
-            MARKER_OUTLINE_PX,
-            square,
-        ));
+        c.lines.push(
+            LineInstance::point(
+                p - c.origin,
+                id,
+                colour,
+                outline,
+                size,
+                MARKER_OUTLINE_PX,
+                square,
+            )
+            .with_icon(icon),
+        );
     }
 
     fn triangles(&mut self, pts: &[DVec3], id: u32, colour: Rgba) {
@@ -706,15 +727,18 @@ impl TileDrape {
             let [lon, lat] = p.at;
             for shift in surface.shifts(lon, lon) {
                 if let Some(at) = surface.point(lon, lat, shift) {
-                    self.points.push(LineInstance::point(
-                        at,
-                        id,
-                        p.colour,
-                        p.outline,
-                        p.size_px,
-                        MARKER_OUTLINE_PX,
-                        p.square,
-                    ));
+                    self.points.push(
+                        LineInstance::point(
+                            at,
+                            id,
+                            p.colour,
+                            p.outline,
+                            p.size_px,
+                            MARKER_OUTLINE_PX,
+                            p.square,
+                        )
+                        .with_icon(p.icon),
+                    );
                 }
             }
         }

@@ -28,7 +28,7 @@ const FILL_TOLERANCE: f32 = 1.0e-5;
 /// The same for a line's centre against the four terrain texels around it.
 const LINE_TOLERANCE: f32 = 1.0e-4;
 
-/// One line segment or point symbol (48 bytes).
+/// One line segment or point symbol (64 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub(crate) struct LineInstance {
@@ -40,6 +40,9 @@ pub(crate) struct LineInstance {
     pub outline: u32,
     pub width_px: f32,
     pub outline_px: f32,
+    /// A point's icon: its layer in the icon array plus one (0: none).
+    pub icon: u32,
+    pub pad: [u32; 3],
 }
 
 fn f32x3(p: DVec3) -> [f32; 3] {
@@ -57,6 +60,8 @@ impl LineInstance {
             outline: colour.packed(),
             width_px,
             outline_px: 0.0,
+            icon: 0,
+            pad: [0; 3],
         }
     }
 
@@ -78,9 +83,19 @@ impl LineInstance {
             outline: outline.packed(),
             width_px: size_px,
             outline_px: if square { -outline_px } else { outline_px },
+            icon: 0,
+            pad: [0; 3],
         }
     }
+
+    /// The point drawn with icon `icon` (layer plus one; 0 keeps the symbol).
+    pub(crate) fn with_icon(self, icon: u32) -> Self {
+        Self { icon, ..self }
+    }
 }
+
+/// Side of an icon in the icon array, texels.
+pub(crate) const ICON_SIZE: u32 = 64;
 
 /// One fill vertex (24 bytes).
 #[repr(C)]
@@ -232,7 +247,10 @@ pub(crate) struct Gpu {
     oit_draw_count: u32,
     volume_ids: wgpu::RenderPipeline,
     oit: Oit,
-    bind_group: Option<(wgpu::BindGroup, [u64; 2], wgpu::TextureView)>,
+    bind_group: Option<(wgpu::BindGroup, [u64; 3], wgpu::TextureView)>,
+    icons: wgpu::TextureView,
+    icon_sampler: wgpu::Sampler,
+    icon_count: u32,
     pub line_count: u32,
     pub fill_vertices: u32,
 }
@@ -291,6 +309,20 @@ impl Gpu {
                         has_dynamic_offset: false,
                         min_binding_size: None,
                     },
+                ),
+                entry(
+                    4,
+                    wgpu::ShaderStages::FRAGMENT,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                ),
+                entry(
+                    5,
+                    wgpu::ShaderStages::FRAGMENT,
+                    wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                 ),
             ],
         });
@@ -377,7 +409,16 @@ impl Gpu {
         let oit = Oit::new(device, &module, &layout, formats, &fill_attrs);
         let line_bytes = size_of::<LineInstance>() as u64;
         let fill_bytes = size_of::<FillVertex>() as u64;
+        let icon_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("vector icons"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
         Self {
+            icons: icon_array(device, frame.queue(), &[]),
+            icon_sampler,
+            icon_count: 0,
             volume_ids,
             oit,
             oit_draws: Growing::new(
@@ -428,6 +469,16 @@ impl Gpu {
             line_count: 0,
             fill_vertices: 0,
         }
+    }
+
+    /// Replaces the icon array by `icons` (RGBA8, [`ICON_SIZE`] squared each), if their
+    /// number changed.
+    pub(crate) fn set_icons(&mut self, frame: &FrameContext<'_>, icons: &[Vec<u8>]) {
+        if icons.len() as u32 == self.icon_count {
+            return;
+        }
+        self.icons = icon_array(frame.device(), frame.queue(), icons);
+        self.icon_count = icons.len() as u32;
     }
 
     /// Whether an entry is on the GPU.
@@ -593,7 +644,11 @@ impl Gpu {
             .write(device, queue, bytemuck::cast_slice(&offsets));
         // The bind group follows the anchor buffer and the frame's depth texture.
         let depth = frame.terrain_depth();
-        let sizes = [self.anchors.buffer.size(), self.lines.buffer.size()];
+        let sizes = [
+            self.anchors.buffer.size(),
+            self.lines.buffer.size(),
+            u64::from(self.icon_count),
+        ];
         if self
             .bind_group
             .as_ref()
@@ -618,6 +673,14 @@ impl Gpu {
                     wgpu::BindGroupEntry {
                         binding: 3,
                         resource: self.lines.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: wgpu::BindingResource::TextureView(&self.icons),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: wgpu::BindingResource::Sampler(&self.icon_sampler),
                     },
                 ],
             });
@@ -974,6 +1037,54 @@ impl Oit {
         });
         self.group = Some((group, key));
     }
+}
+
+/// A texture array of icons (at least one layer, transparent when there is none).
+fn icon_array(device: &wgpu::Device, queue: &wgpu::Queue, icons: &[Vec<u8>]) -> wgpu::TextureView {
+    let layers = icons.len().max(1) as u32;
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("vector icons"),
+        size: wgpu::Extent3d {
+            width: ICON_SIZE,
+            height: ICON_SIZE,
+            depth_or_array_layers: layers,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (layer, pixels) in icons.iter().enumerate() {
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: layer as u32,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            pixels,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(ICON_SIZE * 4),
+                rows_per_image: Some(ICON_SIZE),
+            },
+            wgpu::Extent3d {
+                width: ICON_SIZE,
+                height: ICON_SIZE,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+    texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
 }
 
 /// A range of `len`, growing the allocator (doubling) when none is free.

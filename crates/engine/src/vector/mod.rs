@@ -88,6 +88,8 @@ pub struct VectorLayer {
     last_drawn: Vec<TileKey>,
     geometry_changed: bool,
     gpu: Option<Gpu>,
+    /// Icons by file, decoded once.
+    icons: Icons,
     /// GPU entries to drop (features changed or removed, tiles invalidated).
     released: Vec<EntryKey>,
     stats: VectorStats,
@@ -121,6 +123,7 @@ impl VectorLayer {
             geometry_changed: false,
             gpu: None,
             released: Vec::new(),
+            icons: Icons::default(),
             stats: VectorStats::default(),
         }
     }
@@ -246,7 +249,16 @@ impl VectorLayer {
             if e.built.is_some() {
                 continue;
             }
-            let b = build::build(&e.feature, pick, ellipsoid, exaggeration, &ground);
+            let icons = &mut self.icons;
+            let mut icon_of = |path: &str| icons.layer_of(path);
+            let b = build::build(
+                &e.feature,
+                pick,
+                ellipsoid,
+                exaggeration,
+                &ground,
+                &mut icon_of,
+            );
             self.changed.extend(b.bbox.map(|bb| (id, bb)));
             self.geometry_changed |= !b.chunks.is_empty();
             e.built = Some(b);
@@ -409,6 +421,57 @@ impl VectorLayer {
 /// Frames a tile's pieces stay on the GPU after it was last drawn.
 const GPU_KEEP_FRAMES: u64 = 30;
 
+/// Point icons: PNG files decoded and scaled to [`gpu::ICON_SIZE`] squared, each a layer.
+#[derive(Default)]
+struct Icons {
+    layers: FxHashMap<String, u32>,
+    pixels: Vec<Vec<u8>>,
+}
+
+/// Most icons a layer holds.
+const MAX_ICONS: usize = 256;
+
+impl Icons {
+    /// The layer plus one of the icon at `path` (read, decoded and scaled the first time);
+    /// 0, with a warning, if it cannot be read.
+    fn layer_of(&mut self, path: &str) -> u32 {
+        if let Some(&l) = self.layers.get(path) {
+            return l;
+        }
+        let layer = match self.load(path) {
+            Ok(pixels) if self.pixels.len() < MAX_ICONS => {
+                self.pixels.push(pixels);
+                self.pixels.len() as u32
+            }
+            Ok(_) => {
+                tracing::warn!("icon {path}: more than {MAX_ICONS} icons; drawn as a symbol");
+                0
+            }
+            Err(e) => {
+                tracing::warn!("icon {path}: {e}; drawn as a symbol");
+                0
+            }
+        };
+        self.layers.insert(path.to_owned(), layer);
+        layer
+    }
+
+    fn load(&self, path: &str) -> Result<Vec<u8>, String> {
+        let bytes = globus_tiling::files::read_capped(Path::new(path), 16 << 20)
+            .map_err(|e| e.to_string())?;
+        let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
+            .map_err(|e| format!("not a PNG we can read: {e}"))?;
+        let size = gpu::ICON_SIZE;
+        let scaled = image::imageops::resize(
+            &image.to_rgba8(),
+            size,
+            size,
+            image::imageops::FilterType::Triangle,
+        );
+        Ok(scaled.into_raw())
+    }
+}
+
 /// A drawn tile's draped pieces.
 struct CachedTile {
     drape: TileDrape,
@@ -453,6 +516,7 @@ impl Overlay for VectorLayer {
             self.sync_gpu(frame);
         }
         if let Some(gpu) = &mut self.gpu {
+            gpu.set_icons(frame, &self.icons.pixels);
             gpu.frame(frame);
             self.stats.line_instances = gpu.line_count;
             self.stats.fill_vertices = gpu.fill_vertices;

@@ -133,9 +133,16 @@ struct Line {
     width_px: f32,
     // Outline width, pixels; negative: a square symbol.
     outline_px: f32,
+    // A point's icon: its layer plus one (0: the symbol).
+    icon: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(3) var<storage, read> lines: array<Line>;
+@group(0) @binding(4) var icons: texture_2d_array<f32>;
+@group(0) @binding(5) var icon_sampler: sampler;
 
 struct LineOut {
     @builtin(position) clip: vec4<f32>,
@@ -145,6 +152,7 @@ struct LineOut {
     @location(3) @interpolate(flat) colour: vec4<f32>,
     @location(4) @interpolate(flat) outline: vec4<f32>,
     @location(5) @interpolate(flat) id: u32,
+    @location(6) @interpolate(flat) icon: u32,
 }
 
 // Eye-space depth below which a line end is moved along the line (in front of the camera).
@@ -204,6 +212,7 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     out.colour = unpack_colour(v.colour);
     out.outline = unpack_colour(v.outline);
     out.id = v.id;
+    out.icon = v.icon;
     return out;
 }
 
@@ -248,6 +257,18 @@ fn line_fs(in: LineOut) -> Target {
     );
     if (nearest_far > z * (1.0 + frame.tolerance.y)) {
         discard;
+    }
+    if (in.icon != 0u) {
+        // An icon: the square of the symbol's size, textured.
+        let uv = (p - centre) / max(width, 1.0) + vec2<f32>(0.5);
+        if (any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0))) {
+            discard;
+        }
+        let texel = textureSampleLevel(icons, icon_sampler, uv, i32(in.icon - 1u), 0.0);
+        if (texel.a <= 0.0) {
+            discard;
+        }
+        return Target(texel, in.id);
     }
     var colour = in.colour;
     let ow = abs(outline_px);
