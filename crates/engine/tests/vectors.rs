@@ -805,3 +805,42 @@ fn a_point_can_be_drawn_as_an_icon_from_a_png() {
         "fallback symbol: {c:?}"
     );
 }
+
+#[test]
+fn exaggeration_raises_vector_geometry_with_the_terrain() {
+    let (w, h) = (320u32, 240u32);
+    let mut builder = GlobeBuilder::new();
+    builder.exaggeration(3.0);
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+    let mut layer = VectorLayer::new();
+    layer.add(point_feature(0, 7.5, 46.5, "#ff0000"));
+    // From the side: 20 km up drawn at 60 km is tens of pixels higher on screen.
+    let cam = common::camera(7.5, 45.3, 40_000.0, 0.0, 0.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [&mut layer])
+        .expect("render");
+    let globe = off.globe();
+    let camera = *globe.camera().expect("camera");
+    let (lon, lat) = (7.5f64.to_radians(), 46.5f64.to_radians());
+    let raised = camera
+        .project(globe.world_position(Cartographic::new(lon, lat, 20_000.0)))
+        .expect("in view");
+    let true_height = globe
+        .ellipsoid()
+        .cartographic_to_ecef(Cartographic::new(lon, lat, 20_000.0));
+    let unraised = camera.project(true_height).expect("in view");
+    assert!(
+        (raised.y - unraised.y).abs() > 20.0,
+        "{raised:?} {unraised:?}"
+    );
+    let red = |p: [u8; 4]| p[0] > 200 && p[1] < 80 && p[2] < 80;
+    assert!(
+        red(frame.image.get(raised.x as u32, raised.y as u32)),
+        "no point where it is raised to"
+    );
+    assert!(
+        !red(frame.image.get(unraised.x as u32, unraised.y as u32)),
+        "a point at its true height"
+    );
+}
