@@ -109,12 +109,7 @@ pub fn style_map(
 ) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
     let mut out = serde_json::Map::new();
     for (k, v) in table {
-        if !globus_vector::style::KEYS.contains(&k.as_str()) {
-            bail!(
-                "{what}: `{k}` is not a style key (one of {})",
-                globus_vector::style::KEYS.join(", ")
-            );
-        }
+        globus_vector::style::check_key(k).with_context(|| what.to_owned())?;
         out.insert(k.clone(), serde_json::to_value(v)?);
     }
     Ok(out)

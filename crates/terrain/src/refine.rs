@@ -479,10 +479,6 @@ mod tests {
                     "{key}: child {worst:.3} m from the parent mesh, parent error {:.3} m",
                     parent.geometric_error_m
                 );
-                eprintln!(
-                    "{key}: worst {worst:.3} m, parent error {:.3} m, child error {:.3} m",
-                    parent.geometric_error_m, child.geometric_error_m
-                );
                 if depth > 1 {
                     assert!(child.geometric_error_m < parent.geometric_error_m);
                 }

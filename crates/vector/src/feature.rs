@@ -81,7 +81,7 @@ fn add_geometry(out: &mut Feature, value: geojson::Value, warnings: &mut Vec<Str
     match value {
         G::Point(p) => match shape::position(&p) {
             Ok(p) => out.points.push(p),
-            Err(e) => warnings.push(e),
+            Err(e) => warnings.push(e.to_string()),
         },
         G::MultiPoint(ps) => {
             for p in ps {
@@ -90,7 +90,7 @@ fn add_geometry(out: &mut Feature, value: geojson::Value, warnings: &mut Vec<Str
         }
         G::LineString(l) => match shape::line(&l) {
             Ok(l) => out.lines.push(l),
-            Err(e) => warnings.push(e),
+            Err(e) => warnings.push(e.to_string()),
         },
         G::MultiLineString(ls) => {
             for l in ls {

@@ -131,7 +131,6 @@ mod tests {
             });
             any
         });
-        eprintln!("{r:?}");
         assert!(
             r.cases > 0 && r.accepted > 0 && r.accepted < r.cases,
             "{r:?}"

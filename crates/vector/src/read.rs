@@ -54,8 +54,28 @@ pub struct ReadSummary {
     pub stopped: Option<String>,
 }
 
-/// One feature as read: its index in the file and the feature, or why it is not one.
-pub type RawFeature = Result<geojson::Feature, String>;
+/// Why one record of a file is not a feature.
+#[derive(Debug, thiserror::Error)]
+pub enum FeatureError {
+    /// An RFC 8142 record that is not JSON.
+    #[error("not JSON: {0}")]
+    NotJson(#[from] serde_json::Error),
+    /// JSON that the `geojson` crate does not take as a feature or geometry.
+    #[error("{0}")]
+    GeoJson(#[from] Box<geojson::Error>),
+    /// An object of another type.
+    #[error("a {0:?}, not a Feature")]
+    NotAFeature(String),
+    /// An object without `type`.
+    #[error("an object without a \"type\"")]
+    NoType,
+    /// An airspace shape that is not an object with a `polygon`.
+    #[error("a shape {0}")]
+    Shape(&'static str),
+}
+
+/// One feature as read, or why it is not one.
+pub type RawFeature = Result<geojson::Feature, FeatureError>;
 
 /// Reads `path`, handing each feature to `sink` with its index in the file.
 pub fn read_file(
@@ -170,7 +190,7 @@ fn read_sequence(
             continue;
         }
         let feature = serde_json::from_slice::<Value>(&record)
-            .map_err(|e| format!("not JSON: {e}"))
+            .map_err(FeatureError::from)
             .and_then(feature_from_value);
         sink(summary.features, feature);
         summary.features += 1;
@@ -180,15 +200,15 @@ fn read_sequence(
 
 fn feature_from_value(value: Value) -> RawFeature {
     match value.get("type").and_then(Value::as_str) {
-        Some("Feature") => geojson::Feature::try_from(value).map_err(|e| e.to_string()),
+        Some("Feature") => geojson::Feature::try_from(value).map_err(|e| Box::new(e).into()),
         Some(
             "Point" | "MultiPoint" | "LineString" | "MultiLineString" | "Polygon" | "MultiPolygon"
             | "GeometryCollection",
         ) => geojson::Geometry::try_from(value)
             .map(geojson::Feature::from)
-            .map_err(|e| e.to_string()),
-        Some(other) => Err(format!("a {other:?}, not a Feature")),
-        None => Err("an object without a \"type\"".to_owned()),
+            .map_err(|e| Box::new(e).into()),
+        Some(other) => Err(FeatureError::NotAFeature(other.to_owned())),
+        None => Err(FeatureError::NoType),
     }
 }
 
@@ -266,12 +286,13 @@ fn airspace(
     for (i, shape) in shapes.into_iter().enumerate() {
         let feature = (|| {
             let Value::Object(mut shape) = shape else {
-                return Err("a shape that is not an object".to_owned());
+                return Err(FeatureError::Shape("that is not an object"));
             };
             let polygon = shape
                 .remove("polygon")
-                .ok_or_else(|| "a shape without \"polygon\"".to_owned())?;
-            let geometry = geojson::Geometry::try_from(polygon).map_err(|e| e.to_string())?;
+                .ok_or(FeatureError::Shape("without \"polygon\""))?;
+            let geometry = geojson::Geometry::try_from(polygon)
+                .map_err(|e| FeatureError::from(Box::new(e)))?;
             let mut properties = Map::new();
             for key in ["name", "type", "designator"] {
                 if let Some(v) = map.get(key) {

@@ -32,32 +32,77 @@ pub enum Straight {
     Chord,
 }
 
+/// What is wrong with a position, line or ring.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    /// Fewer than two numbers.
+    #[error("a position with {0} numbers")]
+    ShortPosition(usize),
+    /// NaN or infinite.
+    #[error("a position that is not finite: {0:?}")]
+    NotFinite(Vec<f64>),
+    /// Longitude or latitude beyond their range.
+    #[error("a position out of range: lon {lon}, lat {lat}")]
+    OutOfRange {
+        /// Degrees.
+        lon: f64,
+        /// Degrees.
+        lat: f64,
+    },
+    /// A height beyond 10,000 km.
+    #[error("a height of {0} m")]
+    Height(f64),
+    /// A line without two distinct positions.
+    #[error("a line with fewer than two distinct positions")]
+    ShortLine,
+    /// A ring of fewer than four positions.
+    #[error("a ring of {0} positions (at least 4)")]
+    ShortRing(usize),
+    /// First and last positions differ.
+    #[error("an unclosed ring: it starts at {first:?} and ends at {last:?}")]
+    Unclosed {
+        /// Longitude, latitude.
+        first: [f64; 2],
+        /// Longitude, latitude.
+        last: [f64; 2],
+    },
+    /// A ring winding round a pole more than once.
+    #[error("a ring winding {0:.0} degrees around a pole")]
+    Winding(f64),
+    /// Fewer than three distinct positions.
+    #[error("a ring with fewer than three distinct positions")]
+    FewDistinct,
+    /// All positions on one line.
+    #[error("a ring without area (all its positions on one line)")]
+    NoArea,
+}
+
 /// Deepest halving of one piece (2^12 pieces per input segment).
 const MAX_SPLIT_DEPTH: u32 = 12;
 
 /// Checks one GeoJSON position: two or three finite numbers, longitude in [-180, 180] and
 /// latitude in [-90, 90].
-pub fn position(p: &[f64]) -> Result<Position, String> {
+pub fn position(p: &[f64]) -> Result<Position, GeometryError> {
     let (lon, lat) = match p {
         [lon, lat, ..] => (*lon, *lat),
-        _ => return Err(format!("a position with {} numbers", p.len())),
+        _ => return Err(GeometryError::ShortPosition(p.len())),
     };
     let h = p.get(2).copied().unwrap_or(0.0);
     if !(lon.is_finite() && lat.is_finite() && h.is_finite()) {
-        return Err(format!("a position that is not finite: {p:?}"));
+        return Err(GeometryError::NotFinite(p.to_vec()));
     }
     if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) {
-        return Err(format!("a position out of range: lon {lon}, lat {lat}"));
+        return Err(GeometryError::OutOfRange { lon, lat });
     }
     if h.abs() > 1.0e7 {
-        return Err(format!("a height of {h} m"));
+        return Err(GeometryError::Height(h));
     }
     Ok([lon, lat, h])
 }
 
 /// Positions of a line, consecutive duplicates dropped, longitudes unwrapped. At least two
 /// distinct positions.
-pub fn line(coords: &[Vec<f64>]) -> Result<Vec<Position>, String> {
+pub fn line(coords: &[Vec<f64>]) -> Result<Vec<Position>, GeometryError> {
     let mut out: Vec<Position> = Vec::with_capacity(coords.len());
     for c in coords {
         let mut p = position(c)?;
@@ -70,25 +115,24 @@ pub fn line(coords: &[Vec<f64>]) -> Result<Vec<Position>, String> {
         out.push(p);
     }
     if out.len() < 2 {
-        return Err("a line with fewer than two distinct positions".to_owned());
+        return Err(GeometryError::ShortLine);
     }
     Ok(out)
 }
 
 /// A closed ring: checked (closed, three distinct positions, an area), the closing position
 /// dropped, longitudes unwrapped, and closed over the pole it winds around.
-pub fn ring(coords: &[Vec<f64>]) -> Result<Vec<Position>, String> {
+pub fn ring(coords: &[Vec<f64>]) -> Result<Vec<Position>, GeometryError> {
     if coords.len() < 4 {
-        return Err(format!("a ring of {} positions (at least 4)", coords.len()));
+        return Err(GeometryError::ShortRing(coords.len()));
     }
     let first = position(&coords[0])?;
     let last = position(&coords[coords.len() - 1])?;
     if first[0] != last[0] || first[1] != last[1] {
-        return Err(format!(
-            "an unclosed ring: it starts at {:?} and ends at {:?}",
-            &first[..2],
-            &last[..2]
-        ));
+        return Err(GeometryError::Unclosed {
+            first: [first[0], first[1]],
+            last: [last[0], last[1]],
+        });
     }
     let mut pts = line(coords)?;
     let end = pts[pts.len() - 1];
@@ -102,13 +146,13 @@ pub fn ring(coords: &[Vec<f64>]) -> Result<Vec<Position>, String> {
         pts.push([end[0], pole, end[2]]);
         pts.push([pts[0][0], pole, pts[0][2]]);
     } else {
-        return Err(format!("a ring winding {:.0} degrees around a pole", turn));
+        return Err(GeometryError::Winding(turn));
     }
     if pts.len() < 3 {
-        return Err("a ring with fewer than three distinct positions".to_owned());
+        return Err(GeometryError::FewDistinct);
     }
     if signed_area(&pts).abs() < 1e-18 {
-        return Err("a ring without area (all its positions on one line)".to_owned());
+        return Err(GeometryError::NoArea);
     }
     Ok(pts)
 }
@@ -508,9 +552,12 @@ mod tests {
     #[test]
     fn rings_must_be_closed_and_have_area() {
         let unclosed = ring_of(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
-        assert!(ring(&unclosed).unwrap_err().contains("unclosed"));
+        assert!(matches!(
+            ring(&unclosed),
+            Err(GeometryError::Unclosed { .. })
+        ));
         let flat = ring_of(&[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [0.0, 0.0]]);
-        assert!(ring(&flat).unwrap_err().contains("area"));
+        assert_eq!(ring(&flat), Err(GeometryError::NoArea));
         let short = ring_of(&[[0.0, 0.0], [1.0, 1.0], [0.0, 0.0]]);
         assert!(ring(&short).is_err());
         let square = ring_of(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.0, 0.0]]);

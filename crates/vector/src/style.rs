@@ -184,20 +184,16 @@ pub struct StyleRules {
 impl StyleRules {
     /// Rules from a URL-fragment-like list, `key=value&key=value` with %-escapes (`%23` for
     /// `#`), as overrides. Errors name the bad pair.
-    pub fn from_fragment(fragment: &str) -> Result<Self, String> {
+    pub fn from_fragment(fragment: &str) -> Result<Self, StyleError> {
         let mut overrides = Map::new();
         for pair in fragment.split('&').filter(|p| !p.is_empty()) {
             let (k, v) = pair
                 .split_once('=')
-                .ok_or_else(|| format!("`{pair}` is not key=value"))?;
-            let v = percent_decode(v).ok_or_else(|| format!("`{pair}`: bad %-escape"))?;
-            let k = percent_decode(k).ok_or_else(|| format!("`{pair}`: bad %-escape"))?;
-            if !KEYS.contains(&k.as_str()) {
-                return Err(format!(
-                    "`{k}` is not a style key (one of {})",
-                    KEYS.join(", ")
-                ));
-            }
+                .ok_or_else(|| StyleError::NotKeyValue(pair.to_owned()))?;
+            let escape = || StyleError::BadEscape(pair.to_owned());
+            let v = percent_decode(v).ok_or_else(escape)?;
+            let k = percent_decode(k).ok_or_else(escape)?;
+            check_key(&k)?;
             overrides.insert(k, Value::String(v));
         }
         Ok(Self {
@@ -385,6 +381,29 @@ fn limit(
         .and_then(Value::as_str)
         .unwrap_or("m");
     Some((parse_height(v, u), v.clone()))
+}
+
+/// Why style rules cannot be read.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum StyleError {
+    /// A pair without `=`.
+    #[error("`{0}` is not key=value")]
+    NotKeyValue(String),
+    /// A %-escape that is not two hex digits (or not UTF-8).
+    #[error("`{0}`: bad %-escape")]
+    BadEscape(String),
+    /// A key that is not in [`KEYS`].
+    #[error("`{0}` is not a style key (one of {keys})", keys = KEYS.join(", "))]
+    UnknownKey(String),
+}
+
+/// Checks that `key` is a style key.
+pub fn check_key(key: &str) -> Result<(), StyleError> {
+    if KEYS.contains(&key) {
+        Ok(())
+    } else {
+        Err(StyleError::UnknownKey(key.to_owned()))
+    }
 }
 
 /// Style keys accepted on the command line and in the config file.

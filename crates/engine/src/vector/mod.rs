@@ -428,6 +428,15 @@ struct Icons {
     pixels: Vec<Vec<u8>>,
 }
 
+/// Why an icon cannot be drawn.
+#[derive(Debug, thiserror::Error)]
+enum IconError {
+    #[error(transparent)]
+    Read(#[from] std::io::Error),
+    #[error("not a PNG we can read: {0}")]
+    Decode(#[from] image::ImageError),
+}
+
 /// Most icons a layer holds.
 const MAX_ICONS: usize = 256;
 
@@ -456,11 +465,9 @@ impl Icons {
         layer
     }
 
-    fn load(&self, path: &str) -> Result<Vec<u8>, String> {
-        let bytes = globus_tiling::files::read_capped(Path::new(path), 16 << 20)
-            .map_err(|e| e.to_string())?;
-        let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
-            .map_err(|e| format!("not a PNG we can read: {e}"))?;
+    fn load(&self, path: &str) -> Result<Vec<u8>, IconError> {
+        let bytes = globus_tiling::files::read_capped(Path::new(path), 16 << 20)?;
+        let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)?;
         let size = gpu::ICON_SIZE;
         let scaled = image::imageops::resize(
             &image.to_rgba8(),
