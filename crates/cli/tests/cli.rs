@@ -486,24 +486,17 @@ fn render_draws_vector_files_from_the_command_line_and_the_config() {
     );
     // Bad style keys and files that are not GeoJSON are one line each.
     std::fs::write(&config, "[vector_style]\nstrokes = 1\n").unwrap();
-    fails_with_one_line(
-        &[
-            "render",
-            "--camera",
-            "0,0,1e7,0,-90",
-            "--size",
-            "8x8",
-            "--out",
-            png.to_str().unwrap(),
-            "--config",
-            config.to_str().unwrap(),
-        ],
-        &["vector_style", "`strokes` is not a style key"],
-    );
     let csv = dir.join("airports.csv");
     std::fs::write(&csv, "icao,lat,lon\n").unwrap();
-    fails_with_one_line(
-        &[
+    for (flag, file, needles) in [
+        (
+            "--config",
+            &config,
+            ["vector_style", "`strokes` is not a style key"],
+        ),
+        ("--vector", &csv, ["airports.csv", "not GeoJSON"]),
+    ] {
+        let args = [
             "render",
             "--camera",
             "0,0,1e7,0,-90",
@@ -511,9 +504,9 @@ fn render_draws_vector_files_from_the_command_line_and_the_config() {
             "8x8",
             "--out",
             png.to_str().unwrap(),
-            "--vector",
-            csv.to_str().unwrap(),
-        ],
-        &["airports.csv", "not GeoJSON"],
-    );
+            flag,
+            file.to_str().unwrap(),
+        ];
+        fails_with_one_line(&args, &needles);
+    }
 }

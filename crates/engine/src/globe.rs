@@ -349,11 +349,7 @@ impl Globe {
     /// source's own full-resolution answer if it has one (the procedural planet), else the
     /// loaded tiles' ([`Globe::height_at`]), else 0.
     pub fn ground_height_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
-        if let Some(h) = self.layer.source().height_at(lon_rad, lat_rad) {
-            return h;
-        }
-        self.height_at(lon_rad, lat_rad)
-            .map_or(0.0, |h| h.height_m())
+        query::ground_height_m(&self.layer, lon_rad, lat_rad)
     }
 
     /// The ground height as drawn (times the exaggeration), metres above the ellipsoid.

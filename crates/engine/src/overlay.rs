@@ -122,10 +122,7 @@ impl FrameContext<'_> {
     /// The ground height (true metres above the ellipsoid) at a longitude and latitude
     /// (radians): the source's own answer if it has one, else the finest loaded tiles', else 0.
     pub fn ground_height_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
-        if let Some(h) = self.layer.source().height_at(lon_rad, lat_rad) {
-            return h;
-        }
-        crate::query::height_at(self.layer, lon_rad, lat_rad).map_or(0.0, |h| h.height_m())
+        crate::query::ground_height_m(self.layer, lon_rad, lat_rad)
     }
 
     /// The ECEF point drawn for a geodetic position: its height above the ellipsoid raised

@@ -95,6 +95,16 @@ fn deepest_loaded(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Option<u8
     best
 }
 
+/// The best known ground height at a longitude and latitude (radians), true metres: the
+/// source's own full-resolution answer if it has one (the procedural planet), else the
+/// loaded tiles' ([`height_at`]), else 0.
+pub(crate) fn ground_height_m(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> f64 {
+    if let Some(h) = layer.source().height_at(lon_rad, lat_rad) {
+        return h;
+    }
+    height_at(layer, lon_rad, lat_rad).map_or(0.0, |h| h.height_m())
+}
+
 /// The height at a longitude and latitude (radians) from the finest loaded tiles around it.
 pub(crate) fn height_at(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Option<TerrainHeight> {
     if !lon_rad.is_finite() || lat_rad.is_nan() || lat_rad.abs() > FRAC_PI_2 {

@@ -6,10 +6,7 @@ mod common;
 
 use std::time::Duration;
 
-use globus_engine::{
-    CameraSpec, Cartographic, DVec3, Ellipsoid, GlobeBuilder, Headless, SourceSpec,
-};
-use globus_tiler::{ElevationEncoding, JobKind, TileJob};
+use globus_engine::{CameraSpec, Cartographic, DVec3, Ellipsoid, GlobeBuilder, Headless};
 use globus_tiling::{TileKey, TilingScheme};
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -49,24 +46,8 @@ impl Hgt {
 /// resolution), no procedural refinement below it, loaded for a view straight down from
 /// 8 km over (11.95 E, 57.7 N).
 fn srtm_globe(exaggeration: f64) -> Headless {
-    let dir = common::scratch("terrain_queries", &format!("srtm_x{exaggeration}"));
-    let job = TileJob {
-        threads: Some(2),
-        ..TileJob::new(
-            JobKind::Dem {
-                encoding: ElevationEncoding::Terrarium,
-                height_scale: None,
-            },
-            vec![globus_test_support::shared_data("N57E011.hgt")],
-            dir.join("srtm"),
-        )
-    };
-    globus_tiler::run(&job).expect("tiling N57E011");
-    let mut builder = GlobeBuilder::new();
-    builder
-        .terrain(SourceSpec::parse(dir.join("srtm").to_str().expect("utf-8")).expect("spec"))
-        .max_level(0)
-        .exaggeration(exaggeration);
+    let mut builder = common::srtm_builder("terrain_queries", &format!("srtm_x{exaggeration}"));
+    builder.exaggeration(exaggeration);
     let mut off = Headless::new(&builder, 320, 240).expect("a GPU or lavapipe, and the pyramid");
     let cam = CameraSpec {
         lon_deg: 11.95,

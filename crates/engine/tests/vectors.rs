@@ -10,10 +10,9 @@ use std::path::Path;
 use std::time::Duration;
 
 use globus_engine::{
-    CameraSpec, Cartographic, DVec3, GlobeBuilder, Headless, RgbaImage, SourceSpec, StyleRules,
-    VectorLayer, View, save_png,
+    CameraSpec, Cartographic, DVec3, GlobeBuilder, Headless, RgbaImage, StyleRules, VectorLayer,
+    View, save_png,
 };
-use globus_tiler::{ElevationEncoding, JobKind, TileJob};
 
 const TIMEOUT: Duration = Duration::from_secs(300);
 
@@ -48,27 +47,6 @@ fn coverage(img: &RgbaImage, bg: &RgbaImage, x: i64, y: i64, colour: [f64; 3]) -
     (dot / (full * full)).clamp(0.0, 1.0)
 }
 
-fn srtm_builder() -> GlobeBuilder {
-    let dir = common::scratch("vectors", "srtm");
-    let job = TileJob {
-        threads: Some(2),
-        ..TileJob::new(
-            JobKind::Dem {
-                encoding: ElevationEncoding::Terrarium,
-                height_scale: None,
-            },
-            vec![globus_test_support::shared_data("N57E011.hgt")],
-            dir.join("srtm"),
-        )
-    };
-    globus_tiler::run(&job).expect("tiling N57E011");
-    let mut builder = GlobeBuilder::new();
-    builder
-        .terrain(SourceSpec::parse(dir.join("srtm").to_str().expect("utf-8")).expect("spec"))
-        .max_level(0);
-    builder
-}
-
 const MAGENTA: [f64; 3] = [255.0, 0.0, 255.0];
 const LINE_PX: f64 = 4.0;
 const LINE_LAT: f64 = 57.45;
@@ -94,7 +72,7 @@ fn with_and_without(
 
 #[test]
 fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
-    let builder = srtm_builder();
+    let builder = common::srtm_builder("vectors", "srtm");
     let (w, h) = (480u32, 360u32);
     let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the pyramid");
     let dir = common::scratch("vectors", "line");
@@ -399,9 +377,14 @@ fn point_feature(index: usize, lon: f64, lat: f64, colour: &str) -> globus_engin
         r##"{{"type": "Feature", "properties": {{"marker-color": "{colour}", "marker-size": 6, "clamp": "absolute"}},
             "geometry": {{"type": "Point", "coordinates": [{lon}, {lat}, 20000]}}}}"##
     );
-    let f: geojson::Feature = text.parse().expect("feature");
-    let mut w = Vec::new();
-    globus_vector::from_geojson(index, f, &StyleRules::default(), &mut w).expect("drawable")
+    feature(index, &text)
+}
+
+/// A GeoJSON feature, checked and styled with the default rules.
+fn feature(index: usize, json: &str) -> globus_engine::Feature {
+    let f: geojson::Feature = json.parse().expect("feature");
+    let mut warnings = Vec::new();
+    globus_vector::from_geojson(index, f, &StyleRules::default(), &mut warnings).expect("drawable")
 }
 
 #[test]
@@ -474,9 +457,7 @@ fn updates_cost_what_changed_and_an_unchanged_frame_rebuilds_nothing() {
             r##"{{"type": "Feature", "properties": {{"stroke": "{colour}", "stroke-width": 5}},
                 "geometry": {{"type": "LineString", "coordinates": [[7.0, 46.25], [7.9, 46.25]]}}}}"##
         );
-        let f: geojson::Feature = text.parse().expect("feature");
-        let mut w = Vec::new();
-        globus_vector::from_geojson(0, f, &StyleRules::default(), &mut w).expect("drawable")
+        feature(0, &text)
     };
     let id = layer.add(line("#ff00ff"));
     let drawn = frame(&mut off, &mut layer);
@@ -522,9 +503,7 @@ fn box_feature(
             "extrude": true, "lower": {lower}, "upper": {upper}}},
             "geometry": {{"type": "Polygon", "coordinates": [[[{w}, {s}], [{e}, {s}], [{e}, {n}], [{w}, {n}], [{w}, {s}]]]}}}}"##
     );
-    let f: geojson::Feature = text.parse().expect("feature");
-    let mut warnings = Vec::new();
-    globus_vector::from_geojson(index, f, &StyleRules::default(), &mut warnings).expect("drawable")
+    feature(index, &text)
 }
 
 fn mean_abs_diff(a: &RgbaImage, b: &RgbaImage) -> f64 {
@@ -666,12 +645,8 @@ fn a_draped_fill_over_mountains_covers_what_the_cpu_projects_with_no_seams_betwe
         r##"{{"type": "Feature", "properties": {{"fill": "#00ff00", "fill-opacity": 1, "stroke-width": 0}},
             "geometry": {{"type": "Polygon", "coordinates": [[[{west}, {south}], [{east}, {south}], [{east}, {north}], [{west}, {north}], [{west}, {south}]]]}}}}"##
     );
-    let f: geojson::Feature = text.parse().expect("feature");
-    let mut warnings = Vec::new();
     let mut layer = VectorLayer::new();
-    layer.add(
-        globus_vector::from_geojson(0, f, &StyleRules::default(), &mut warnings).expect("drawable"),
-    );
+    layer.add(feature(0, &text));
     // Low over the Alps of the procedural planet, looking north across the box: tiles of
     // many levels meet inside it.
     let cam = common::camera(7.8, 45.75, 3_000.0, 0.0, -15.0, true);

@@ -535,6 +535,15 @@ fn clip_ring(ring: &[[f64; 2]], axis: usize, at: f64, above: bool) -> Vec<[f64; 
 mod tests {
     use super::*;
 
+    /// Summed signed area of indexed triangles.
+    fn indexed_area(v: &[[f64; 2]], i: &[u32]) -> f64 {
+        let tris: Vec<[[f64; 2]; 3]> = i
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]].map(|k| v[k as usize]))
+            .collect();
+        area(&tris)
+    }
+
     fn ring_of(pts: &[[f64; 2]]) -> Vec<Vec<f64>> {
         pts.iter().map(|p| p.to_vec()).collect()
     }
@@ -595,13 +604,7 @@ mod tests {
         assert_eq!(r[8][0], 180.0);
         assert!(r[9][1] == 90.0 && r[10][1] == 90.0);
         let (v, i) = triangulate(&[r]);
-        let area: f64 = i
-            .chunks_exact(3)
-            .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|k| v[k as usize]);
-                ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2.0
-            })
-            .sum();
+        let area = indexed_area(&v, &i);
         assert!((area - 360.0 * 10.0).abs() < 1e-6, "{area}");
     }
 
@@ -624,13 +627,7 @@ mod tests {
         ]))
         .unwrap();
         let (v, i) = triangulate(&[outer, hole]);
-        let area: f64 = i
-            .chunks_exact(3)
-            .map(|t| {
-                let [a, b, c] = [t[0], t[1], t[2]].map(|k| v[k as usize]);
-                ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2.0
-            })
-            .sum();
+        let area = indexed_area(&v, &i);
         assert!((area - 12.0).abs() < 1e-9, "{area}");
     }
 

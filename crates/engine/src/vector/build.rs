@@ -153,7 +153,12 @@ pub(crate) fn build(
     };
     let ground = style.clamp == Clamp::Ground;
     let mut chunks = ChunkWriter::default();
-    let lonlat = |pts: &[Position]| pts.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>();
+    let stroke = Stroke {
+        colour: style.stroke,
+        width_px: style.stroke_width_px,
+        path: style.path,
+        id,
+    };
     for line in &feature.lines {
         if style.wall || style.corridor.is_some() {
             let tolerance = style
@@ -200,35 +205,14 @@ pub(crate) fn build(
         if style.stroke_width_px <= 0.0 || style.stroke.0[3] == 0 {
             continue;
         }
-        if ground {
-            let d = shape::densify(
-                ellipsoid,
-                line,
-                false,
-                style.path,
-                Straight::LonLat,
-                PATH_TOLERANCE_M,
-            );
-            let pts = lonlat(&d);
-            let b = Bbox::of(pts.iter().copied());
-            out.draped.lines.push(DrapedLine {
-                pts,
-                bbox: b,
-                colour: style.stroke,
-                width_px: style.stroke_width_px,
-            });
-        } else {
-            let d = shape::densify(
-                ellipsoid,
-                line,
-                false,
-                style.path,
-                Straight::Chord,
-                PATH_TOLERANCE_M,
-            );
-            let pts: Vec<DVec3> = d.iter().map(|&p| world(p)).collect();
-            chunks.line(&pts, id, style.stroke, style.stroke_width_px);
-        }
+        stroke.add(
+            line,
+            ground,
+            ellipsoid,
+            &world,
+            &mut chunks,
+            &mut out.draped,
+        );
     }
     for polygon in &feature.polygons {
         let rings: Vec<Vec<Position>> = polygon
@@ -273,30 +257,17 @@ pub(crate) fn build(
             }
         }
         if style.stroke_width_px > 0.0 && style.stroke.0[3] > 0 {
-            for r in &rings {
-                let mut pts = r.clone();
-                pts.push(r[0]);
-                if ground {
-                    let pts = lonlat(&pts);
-                    let b = Bbox::of(pts.iter().copied());
-                    out.draped.lines.push(DrapedLine {
-                        pts,
-                        bbox: b,
-                        colour: style.stroke,
-                        width_px: style.stroke_width_px,
-                    });
-                } else {
-                    let d = shape::densify(
-                        ellipsoid,
-                        &pts,
-                        false,
-                        style.path,
-                        Straight::Chord,
-                        PATH_TOLERANCE_M,
-                    );
-                    let w: Vec<DVec3> = d.iter().map(|&p| world(p)).collect();
-                    chunks.line(&w, id, style.stroke, style.stroke_width_px);
-                }
+            for r in polygon {
+                let mut closed = r.clone();
+                closed.push(r[0]);
+                stroke.add(
+                    &closed,
+                    ground,
+                    ellipsoid,
+                    &world,
+                    &mut chunks,
+                    &mut out.draped,
+                );
             }
         }
     }
@@ -332,6 +303,47 @@ pub(crate) fn build(
         .reduce(Bbox::union);
     out.chunks = chunks.finish();
     out
+}
+
+/// How a line is stroked.
+struct Stroke {
+    colour: Rgba,
+    width_px: f32,
+    path: globus_vector::PathKind,
+    id: u32,
+}
+
+impl Stroke {
+    /// Adds a line: draped (densified linear in longitude/latitude, cut along the tiles
+    /// when drawn) or at altitude (densified in 3D chords, in chunks).
+    fn add(
+        &self,
+        pts: &[Position],
+        ground: bool,
+        ellipsoid: &Ellipsoid,
+        world: &dyn Fn(Position) -> DVec3,
+        chunks: &mut ChunkWriter,
+        draped: &mut Draped,
+    ) {
+        let straight = if ground {
+            Straight::LonLat
+        } else {
+            Straight::Chord
+        };
+        let d = shape::densify(ellipsoid, pts, false, self.path, straight, PATH_TOLERANCE_M);
+        if ground {
+            let pts: Vec<[f64; 2]> = d.iter().map(|p| [p[0], p[1]]).collect();
+            draped.lines.push(DrapedLine {
+                bbox: Bbox::of(pts.iter().copied()),
+                pts,
+                colour: self.colour,
+                width_px: self.width_px,
+            });
+        } else {
+            let w: Vec<DVec3> = d.iter().map(|&p| world(p)).collect();
+            chunks.line(&w, self.id, self.colour, self.width_px);
+        }
+    }
 }
 
 /// A polygon between two altitudes: translucent walls, top and bottom, its rings as lines at

@@ -306,3 +306,28 @@ pub fn scratch(group: &str, name: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).expect("scratch folder");
     dir
 }
+
+/// A globe over a pyramid `globus tile` makes of the SRTM tile N57E011 (Terrarium PNG,
+/// geographic, to the source's own resolution) in the scratch folder `group/name`, with no
+/// procedural refinement below it.
+pub fn srtm_builder(group: &str, name: &str) -> globus_engine::GlobeBuilder {
+    use globus_tiler::{ElevationEncoding, JobKind, TileJob};
+    let dir = scratch(group, name);
+    let job = TileJob {
+        threads: Some(2),
+        ..TileJob::new(
+            JobKind::Dem {
+                encoding: ElevationEncoding::Terrarium,
+                height_scale: None,
+            },
+            vec![globus_test_support::shared_data("N57E011.hgt")],
+            dir.join("srtm"),
+        )
+    };
+    globus_tiler::run(&job).expect("tiling N57E011");
+    let spec =
+        globus_engine::SourceSpec::parse(dir.join("srtm").to_str().expect("utf-8")).expect("spec");
+    let mut builder = globus_engine::GlobeBuilder::new();
+    builder.terrain(spec).max_level(0);
+    builder
+}
