@@ -79,7 +79,7 @@ pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};
 pub use vector::{FeatureId, VectorLayer, VectorStats};
 
-pub use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
+pub use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid, View};
 pub use globus_render::{
     DrawStats, FrameCamera, FrameFormats, GpuContext, Lighting, PoolStats, RgbaImage,
 };

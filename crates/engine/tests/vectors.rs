@@ -819,3 +819,334 @@ fn exaggeration_raises_vector_geometry_with_the_terrain() {
         "a point at its true height"
     );
 }
+
+/// The alpha a pixel shows `colour` blended with over `background` at, in linear light
+/// (where blending happens): least squares over the three channels.
+fn linear_alpha(img: &RgbaImage, bg: &RgbaImage, x: i64, y: i64, colour: [f64; 3]) -> f64 {
+    let (Some(p), Some(b)) = (pixel(img, x, y), pixel(bg, x, y)) else {
+        return f64::NAN;
+    };
+    let lin = |v: f64| {
+        let s = v / 255.0;
+        if s <= 0.04045 {
+            s / 12.92
+        } else {
+            ((s + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let (mut num, mut den) = (0.0, 0.0);
+    for k in 0..3 {
+        let (pk, bk, ck) = (lin(p[k]), lin(b[k]), lin(colour[k]));
+        num += (pk - bk) * (ck - bk);
+        den += (ck - bk) * (ck - bk);
+    }
+    num / den
+}
+
+/// Coverage of `colour` along the screen path from world `a` to `b`, every quarter pixel:
+/// (pixels along the path, coverage).
+fn along_path(
+    img: &RgbaImage,
+    bg: &RgbaImage,
+    camera: &globus_engine::FrameCamera,
+    (a, b): (DVec3, DVec3),
+    colour: [f64; 3],
+) -> Vec<(f64, f64)> {
+    let (Some(pa), Some(pb)) = (camera.project(a), camera.project(b)) else {
+        return Vec::new();
+    };
+    let steps = ((pb - pa).length() * 4.0).ceil() as usize;
+    (0..=steps)
+        .filter_map(|i| {
+            let t = i as f64 / steps as f64;
+            let q = pa + (pb - pa) * t;
+            let c = coverage(img, bg, q.x.floor() as i64, q.y.floor() as i64, colour);
+            c.is_finite().then_some(((pb - pa).length() * t, c))
+        })
+        .collect()
+}
+
+/// Lengths (pixels) of the runs of samples on and off (coverage above / below one half),
+/// without the first and last (cut by the path's ends).
+fn runs(samples: &[(f64, f64)]) -> (Vec<f64>, Vec<f64>) {
+    let (mut on, mut off) = (Vec::new(), Vec::new());
+    let mut start = 0;
+    for i in 1..samples.len() {
+        let (was, is) = (samples[i - 1].1 > 0.5, samples[i].1 > 0.5);
+        if was != is {
+            if start > 0 {
+                let len = samples[i].0 - samples[start].0;
+                if was { on.push(len) } else { off.push(len) }
+            }
+            start = i;
+        }
+    }
+    (on, off)
+}
+
+#[test]
+fn joins_caps_and_dashes_are_drawn_as_svg_draws_them_and_dashes_stay_on_the_ground() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let cam = common::camera(10.0, 0.0, 60_000.0, 0.0, -90.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    // Right-angled turns (16 px wide) with each join; straight lines with each cap; all at
+    // 20 km, straight below the camera. One dashed line at 20 km and one draped.
+    let hw = 8.0;
+    let (z, step) = (20_000.0, 0.06);
+    let mut layer = VectorLayer::new();
+    let mut features = Vec::new();
+    let joins = ["miter", "round", "bevel"];
+    for (k, join) in joins.iter().enumerate() {
+        let x = 9.82 + 0.13 * k as f64;
+        features.push(feature(
+            k,
+            &format!(
+                r##"{{"type": "Feature", "properties": {{"stroke": "#ff00ff", "stroke-width": {sw},
+                    "stroke-linejoin": "{join}", "clamp": "absolute"}},
+                    "geometry": {{"type": "LineString", "coordinates": [[{x}, 0.13, {z}], [{x}, 0.19, {z}], [{e}, 0.19, {z}]]}}}}"##,
+                sw = 2.0 * hw,
+                e = x + step,
+            ),
+        ));
+    }
+    let caps = ["butt", "round", "square"];
+    for (k, cap) in caps.iter().enumerate() {
+        let x = 9.82 + 0.13 * k as f64;
+        features.push(feature(
+            3 + k,
+            &format!(
+                r##"{{"type": "Feature", "properties": {{"stroke": "#ff00ff", "stroke-width": {sw},
+                    "stroke-linecap": "{cap}", "clamp": "absolute"}},
+                    "geometry": {{"type": "LineString", "coordinates": [[{x}, 0.05, {z}], [{e}, 0.05, {z}]]}}}}"##,
+                sw = 2.0 * hw,
+                e = x + step,
+            ),
+        ));
+    }
+    // Half-transparent zigzags: a joint is not drawn twice.
+    for (k, join) in ["miter", "round"].iter().enumerate() {
+        let x = 9.82 + 0.2 * k as f64;
+        features.push(feature(
+            6 + k,
+            &format!(
+                r##"{{"type": "Feature", "properties": {{"stroke": "#ff00ff", "stroke-width": 10,
+                    "stroke-opacity": 0.5, "stroke-linejoin": "{join}", "clamp": "absolute"}},
+                    "geometry": {{"type": "LineString", "coordinates": [[{x}, -0.05, {z}], [{m}, -0.02, {z}], [{e}, -0.05, {z}]]}}}}"##,
+                m = x + 0.05,
+                e = x + 0.1,
+            ),
+        ));
+    }
+    for (k, clamp) in ["absolute", "ground"].iter().enumerate() {
+        // Far enough apart on the screen: the draped one is three times as far from the eye.
+        let lat = [-0.09, -0.28][k];
+        features.push(feature(
+            8 + k,
+            &format!(
+                r##"{{"type": "Feature", "properties": {{"stroke": "#ff00ff", "stroke-width": 6,
+                    "stroke-dasharray": "16 8", "stroke-linecap": "butt", "clamp": "{clamp}"}},
+                    "geometry": {{"type": "LineString", "coordinates": [[9.6, {lat}, {z}], [10.4, {lat}, {z}]]}}}}"##
+            ),
+        ));
+    }
+    layer.add_batch(features);
+    let (img, bg) = with_and_without(&mut off, &view, &mut layer, "joins_caps_dashes");
+    let globe = off.globe();
+    let camera = *globe.camera().expect("a frame camera");
+    let at = |lon: f64, lat: f64, h: f64| {
+        globe.world_position(Cartographic::new(lon.to_radians(), lat.to_radians(), h))
+    };
+    let px = |p: DVec3| camera.project(p).expect("in view");
+    let cov = |q: globus_engine::DVec2| {
+        coverage(&img, &bg, q.x.floor() as i64, q.y.floor() as i64, MAGENTA)
+    };
+    // Joins: the outer corner of the turn (south-east of the vertex, half way between the
+    // segments' outer edges) at 0.85 and 1.2 half widths: a miter covers both, a round join
+    // the nearer, a bevel (which reaches 0.71) neither; inside the turn, all cover.
+    for (k, join) in joins.iter().enumerate() {
+        let x = 9.82 + 0.13 * k as f64;
+        let v = px(at(x, 0.19, z));
+        let back = (px(at(x, 0.13, z)) - v).normalize();
+        let fwd = (px(at(x + step, 0.19, z)) - v).normalize();
+        let outer = -(back + fwd).normalize();
+        let (near, far) = (cov(v + outer * 0.85 * hw), cov(v + outer * 1.2 * hw));
+        let inner = cov(v - outer * 1.2 * hw);
+        eprintln!(
+            "join {join}: outer corner at 0.85 hw {near:.2}, at 1.2 hw {far:.2}, inner {inner:.2}"
+        );
+        assert!(inner > 0.9, "{join}: inside of the turn {inner:.2}");
+        let (want_near, want_far) = match *join {
+            "miter" => (true, true),
+            "round" => (true, false),
+            _ => (false, false),
+        };
+        assert_eq!(
+            (near > 0.5, far > 0.5),
+            (want_near, want_far),
+            "{join}: {near:.2} {far:.2}"
+        );
+    }
+    // Caps: 0.6 half widths beyond the end on the axis (round and square cover it, butt
+    // not), and 0.8 beyond and 0.8 off the axis (only square).
+    for (k, cap) in caps.iter().enumerate() {
+        let x = 9.82 + 0.13 * k as f64;
+        let end = px(at(x + step, 0.05, z));
+        let d = (end - px(at(x, 0.05, z))).normalize();
+        let n = globus_engine::DVec2::new(-d.y, d.x);
+        let axis = cov(end + d * 0.6 * hw);
+        let corner = cov(end + d * 0.8 * hw + n * 0.8 * hw);
+        let before = cov(end - d * 0.5 * hw);
+        eprintln!(
+            "cap {cap}: before the end {before:.2}, beyond on the axis {axis:.2}, corner {corner:.2}"
+        );
+        assert!(before > 0.9, "{cap}: the line before its end {before:.2}");
+        let want = match *cap {
+            "butt" => (false, false),
+            "round" => (true, false),
+            _ => (true, true),
+        };
+        assert_eq!(
+            (axis > 0.5, corner > 0.5),
+            want,
+            "{cap}: {axis:.2} {corner:.2}"
+        );
+    }
+    // Translucent joints: the vertex carries the same alpha as the middle of a segment
+    // (drawn twice it would carry 0.75 instead of 0.5).
+    let alpha = |q: globus_engine::DVec2| {
+        linear_alpha(&img, &bg, q.x.floor() as i64, q.y.floor() as i64, MAGENTA)
+    };
+    for (k, join) in ["miter", "round"].iter().enumerate() {
+        let x = 9.82 + 0.2 * k as f64;
+        let joint = alpha(px(at(x + 0.05, -0.02, z)));
+        let middle = alpha(px(at(x + 0.025, -0.035, z)));
+        eprintln!("translucent {join}: joint {joint:.3}, segment {middle:.3}");
+        assert!(
+            (joint - middle).abs() < 0.06 && middle > 0.3,
+            "{join}: joint {joint:.3} vs segment {middle:.3}"
+        );
+    }
+    // Dashes: 16 on, 8 off, drawn between 0.7 and 1.42 times that, every dash and gap alike
+    // (no phase jump at tile borders or chunk ends).
+    let check_dashes = |name: &str, samples: &[(f64, f64)]| -> f64 {
+        let (on, offs) = runs(samples);
+        assert!(on.len() >= 10, "{name}: only {} dashes", on.len());
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (dash, gap) = (mean(&on), mean(&offs));
+        eprintln!(
+            "{name}: {} dashes of {dash:.1} px (from {:.1} to {:.1}), gaps {gap:.1} px",
+            on.len(),
+            on.iter().copied().fold(f64::INFINITY, f64::min),
+            on.iter().copied().fold(0.0, f64::max),
+        );
+        let scale = (dash + gap) / 24.0;
+        assert!(
+            (0.69..=1.43).contains(&scale),
+            "{name}: pattern scale {scale:.2}"
+        );
+        assert!(
+            (dash / (dash + gap) - 16.0 / 24.0).abs() < 0.06,
+            "{name}: dashes {dash:.1} px, gaps {gap:.1} px"
+        );
+        for r in on.iter().chain(&offs) {
+            let nominal = if on.contains(r) { dash } else { gap };
+            assert!(
+                (r - nominal).abs() < 2.0,
+                "{name}: a run of {r:.1} px among {nominal:.1}"
+            );
+        }
+        scale
+    };
+    let ground = |lon: f64, lat: f64| {
+        let (l, b) = (lon.to_radians(), lat.to_radians());
+        at(lon, lat, globe.ground_height_m(l, b))
+    };
+    // The pattern's scale level along each line (log2 of its period in metres): the views
+    // are chosen so that it stays clear of a switch (a half) along the sampled parts.
+    let level = |a: DVec3, b: DVec3| {
+        let px_per_m = (px(b) - px(a)).length() / (b - a).length();
+        (24.0 / px_per_m).log2()
+    };
+    for (name, a, b) in [
+        ("at 20 km", at(9.8, -0.09, z), at(10.2, -0.09, z)),
+        ("draped", ground(9.8, -0.28), ground(10.2, -0.28)),
+    ] {
+        let mid = a.lerp(b, 0.5);
+        let ks = [
+            level(a, a.lerp(b, 0.01)),
+            level(mid, mid.lerp(b, 0.01)),
+            level(b.lerp(a, 0.01), b),
+        ];
+        eprintln!("dash level {name}: {ks:.2?}");
+        assert!(
+            ks.iter().all(|k| (k.fract() - 0.5).abs() > 0.05),
+            "{name}: levels {ks:?}"
+        );
+        assert!(
+            ks.iter().all(|k| k.round() == ks[0].round()),
+            "{name}: levels {ks:?}"
+        );
+    }
+    let high = along_path(
+        &img,
+        &bg,
+        &camera,
+        (at(9.8, -0.09, z), at(10.2, -0.09, z)),
+        MAGENTA,
+    );
+    check_dashes("dashes at 20 km", &high);
+    // Draped: sampled along its projected ground points, a piece at a time.
+    let mut draped = Vec::new();
+    for i in 0..40 {
+        let (l0, l1) = (9.8 + 0.01 * f64::from(i), 9.81 + 0.01 * f64::from(i));
+        let piece = along_path(
+            &img,
+            &bg,
+            &camera,
+            (ground(l0, -0.28), ground(l1, -0.28)),
+            MAGENTA,
+        );
+        let base = draped.last().map_or(0.0, |&(s, _)| s);
+        draped.extend(piece.into_iter().skip(1).map(|(s, c)| (base + s, c)));
+    }
+    check_dashes("draped dashes", &draped);
+    // Panned east by a few kilometres, the dashes stay where they were on the ground.
+    let moved =
+        common::camera(10.03, 0.0, 60_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let (img2, bg2) = with_and_without(&mut off, &moved, &mut layer, "dashes_panned");
+    let camera2 = *off.globe().camera().expect("a frame camera");
+    let globe = off.globe();
+    let at2 = |lon: f64| {
+        globe.world_position(Cartographic::new(
+            lon.to_radians(),
+            (-0.09f64).to_radians(),
+            z,
+        ))
+    };
+    let (mut same, mut total) = (0, 0);
+    for i in 0..=2000 {
+        let lon = 9.8 + 0.2 * f64::from(i) / 2000.0;
+        let (Some(p1), Some(p2)) = (camera.project(at2(lon)), camera2.project(at2(lon))) else {
+            continue;
+        };
+        let c1 = coverage(&img, &bg, p1.x.floor() as i64, p1.y.floor() as i64, MAGENTA);
+        let c2 = coverage(
+            &img2,
+            &bg2,
+            p2.x.floor() as i64,
+            p2.y.floor() as i64,
+            MAGENTA,
+        );
+        if c1.is_finite() && c2.is_finite() && (c1 - 0.5).abs() > 0.2 && (c2 - 0.5).abs() > 0.2 {
+            total += 1;
+            same += usize::from((c1 > 0.5) == (c2 > 0.5));
+        }
+    }
+    let share = same as f64 / total.max(1) as f64;
+    eprintln!("panned: {same}/{total} samples of the dashed line agree on the ground");
+    assert!(
+        total > 500 && share > 0.97,
+        "dashes moved on the ground: {same}/{total}"
+    );
+}

@@ -40,6 +40,19 @@ pub struct DrapeSurface {
     skirts: Vec<[u32; 4]>,
 }
 
+/// A piece of a draped line: its ends on the surface (relative to the tile's origin) and
+/// where they are along the input line, as fractional vertex indices (vertex `i` plus the
+/// fraction of segment `i` to `i + 1`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrapedSegment {
+    /// Start on the surface.
+    pub a: DVec3,
+    /// End on the surface.
+    pub b: DVec3,
+    /// Start and end along the line.
+    pub along: [f64; 2],
+}
+
 impl DrapeSurface {
     /// A surface over `rect_deg` (west, south, east, north) from its vertices' texture
     /// coordinates (u east from the west edge, v south from the north edge, 0..1), positions
@@ -114,7 +127,7 @@ impl DrapeSurface {
 
     /// Drapes a line (longitude, latitude in degrees, shifted by `shift`): appends the 3D
     /// segments on the surface, relative to the tile's origin, in order along the line.
-    pub fn drape_line(&self, pts: &[[f64; 2]], shift: f64, out: &mut Vec<[DVec3; 2]>) {
+    pub fn drape_line(&self, pts: &[[f64; 2]], shift: f64, out: &mut Vec<DrapedSegment>) {
         let mut seen = vec![u32::MAX; self.triangles.len()];
         let mut pieces: Vec<(f64, f64, u32)> = Vec::new();
         for (s, w) in pts.windows(2).enumerate() {
@@ -151,7 +164,13 @@ impl DrapeSurface {
                 let lo = lo.max(reached);
                 reached = hi;
                 let p = |t: f64| self.point_in(k, at(t));
-                out.push([p(lo), p(hi)]);
+                let along = [s as f64 + lo, s as f64 + hi];
+                // Pieces meeting on a triangle edge share one end point exactly.
+                let a = match out.last() {
+                    Some(prev) if prev.along[1] == along[0] => prev.b,
+                    _ => p(lo),
+                };
+                out.push(DrapedSegment { a, b: p(hi), along });
             }
         }
     }
@@ -429,7 +448,7 @@ mod tests {
         assert!(out.len() >= 8, "{}", out.len());
         for seg in &out {
             for k in 0..=10 {
-                let p = seg[0].lerp(seg[1], f64::from(k) / 10.0);
+                let p = seg.a.lerp(seg.b, f64::from(k) / 10.0);
                 let (u, v) = (p.x / 1000.0, p.y / 1000.0);
                 let z = mesh_height(&s, u, v);
                 assert!((p.z - z).abs() < 1e-9, "{p:?} vs {z}");
@@ -437,9 +456,15 @@ mod tests {
         }
         // Continuous, from the west edge to the east edge.
         for w in out.windows(2) {
-            assert!((w[0][1] - w[1][0]).length() < 1e-6);
+            assert_eq!(w[0].b, w[1].a);
+            assert_eq!(w[0].along[1], w[1].along[0]);
+            assert!(w[1].along[1] > w[1].along[0]);
         }
-        assert!(out[0][0].x.abs() < 1e-9 && (out[out.len() - 1][1].x - 1000.0).abs() < 1e-9);
+        // Along the input line: the tile's edges at lon 10 and 11 of 9.8..11.3.
+        let first = out[0].along[0];
+        let last = out[out.len() - 1].along[1];
+        assert!((first - 0.2 / 1.5).abs() < 1e-9 && (last - 1.2 / 1.5).abs() < 1e-9);
+        assert!(out[0].a.x.abs() < 1e-9 && (out[out.len() - 1].b.x - 1000.0).abs() < 1e-9);
     }
 
     #[test]
@@ -447,7 +472,7 @@ mod tests {
         let (s, _) = surface();
         let mut out = Vec::new();
         s.drape_line(&[[10.0, 50.5], [11.0, 50.5]], 0.0, &mut out);
-        let length: f64 = out.iter().map(|p| (p[1] - p[0]).truncate().length()).sum();
+        let length: f64 = out.iter().map(|p| (p.b - p.a).truncate().length()).sum();
         assert!((length - 1000.0).abs() < 1e-6, "{length}");
     }
 

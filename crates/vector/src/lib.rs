@@ -20,8 +20,8 @@ pub mod read;
 pub mod shape;
 pub mod style;
 
-pub use drape::DrapeSurface;
+pub use drape::{DrapeSurface, DrapedSegment};
 pub use feature::{Feature, from_geojson};
 pub use load::{FeatureWarning, Loaded, load_file};
 pub use read::{MAX_FEATURE_BYTES, ReadError, ReadSummary, read, read_file};
-pub use style::{Clamp, PathKind, Rgba, Style, StyleRules};
+pub use style::{Clamp, LineCap, LineJoin, PathKind, Rgba, Style, StyleRules};

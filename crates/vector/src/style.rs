@@ -3,7 +3,9 @@
 //! mapbox/simplestyle-spec 1.1.0) plus Globus's own: `extrude`, `lower`, `upper` (vertical
 //! limits with units `m`, `ft` or `FL`), `clamp` (`ground` drapes, `absolute` keeps the
 //! coordinates' third value as metres above the ellipsoid, `relative` above the ground),
-//! `path` (`geodesic` or `rhumb`) and `marker-outline`.
+//! `path` (`geodesic` or `rhumb`) and `marker-outline`, and SVG's `stroke-linejoin` (`round`,
+//! `miter`, `bevel`), `stroke-linecap` (`round`, `butt`, `square`) and `stroke-dasharray`
+//! (dash and gap lengths in pixels, e.g. `"8 4"` or `[8, 4, 2, 4]`).
 //!
 //! Each value is looked up, in order, in the layer's overrides (`--vector FILE#key=value`),
 //! the feature's properties, the layer's defaults (config file), and the built-in defaults
@@ -70,6 +72,32 @@ pub enum PathKind {
     Rhumb,
 }
 
+/// How a line's segments meet (SVG `stroke-linejoin`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineJoin {
+    /// An arc round the joint.
+    Round,
+    /// The outer edges extended until they meet; beyond twice the half width (a turn
+    /// sharper than 120 degrees, MapLibre's miter limit 2) a bevel.
+    Miter,
+    /// The outer corners joined by a straight edge.
+    Bevel,
+}
+
+/// How a line's ends are drawn (SVG `stroke-linecap`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineCap {
+    /// A half disc beyond the end.
+    Round,
+    /// Square, at the end.
+    Butt,
+    /// Square, half the width beyond the end.
+    Square,
+}
+
+/// Largest number of values in a dash pattern.
+pub const MAX_DASHES: usize = 4;
+
 /// A feature's resolved style.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Style {
@@ -77,6 +105,13 @@ pub struct Style {
     pub stroke: Rgba,
     /// Line width, pixels on screen (0: no outline).
     pub stroke_width_px: f32,
+    /// How line segments meet.
+    pub line_join: LineJoin,
+    /// How lines end.
+    pub line_cap: LineCap,
+    /// Dash pattern, pixels (dash, gap, dash, gap; an odd list repeated as SVG does); `None`:
+    /// solid.
+    pub dash_px: Option<[u8; MAX_DASHES]>,
     /// Fill colour (alpha includes `fill-opacity`).
     pub fill: Rgba,
     /// Point symbol colour.
@@ -109,6 +144,9 @@ impl Default for Style {
         Self {
             stroke: Rgba([0x55, 0x55, 0x55, 255]),
             stroke_width_px: 2.0,
+            line_join: LineJoin::Round,
+            line_cap: LineCap::Round,
+            dash_px: None,
             fill: Rgba([0x55, 0x55, 0x55, 153]),
             marker_color: Rgba([0x7e, 0x7e, 0x7e, 255]),
             marker_size_px: 12.0,
@@ -231,6 +269,28 @@ impl StyleRules {
             match number(v).filter(|w| (0.0..=f64::from(MAX_PIXELS)).contains(w)) {
                 Some(w) => style.stroke_width_px = w as f32,
                 None => bad("stroke-width", v),
+            }
+        }
+        if let Some(v) = get("stroke-linejoin") {
+            match v.as_str() {
+                Some("round") => style.line_join = LineJoin::Round,
+                Some("miter") => style.line_join = LineJoin::Miter,
+                Some("bevel") => style.line_join = LineJoin::Bevel,
+                _ => bad("stroke-linejoin", v),
+            }
+        }
+        if let Some(v) = get("stroke-linecap") {
+            match v.as_str() {
+                Some("round") => style.line_cap = LineCap::Round,
+                Some("butt") => style.line_cap = LineCap::Butt,
+                Some("square") => style.line_cap = LineCap::Square,
+                _ => bad("stroke-linecap", v),
+            }
+        }
+        if let Some(v) = get("stroke-dasharray") {
+            match dashes(v) {
+                Some(d) => style.dash_px = d,
+                None => bad("stroke-dasharray", v),
             }
         }
         if let Some(v) = get("marker-size") {
@@ -365,6 +425,44 @@ fn number(v: &Value) -> Option<f64> {
     }
 }
 
+/// A dash pattern: up to [`MAX_DASHES`] lengths in whole pixels (0-255), as a JSON array or
+/// a string separated by spaces or commas; an odd list is repeated (SVG); `"none"` or an
+/// all-zero list is solid (`Some(None)`); anything else `None`.
+fn dashes(v: &Value) -> Option<Option<[u8; MAX_DASHES]>> {
+    let values: Vec<f64> = match v {
+        Value::Array(a) => a.iter().map(number).collect::<Option<_>>()?,
+        Value::Number(n) => vec![n.as_f64()?],
+        Value::String(s) if s.trim() == "none" => return Some(None),
+        Value::String(s) => s
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|t| !t.is_empty())
+            .map(|t| t.parse::<f64>().ok())
+            .collect::<Option<_>>()?,
+        _ => return None,
+    };
+    let mut list = values;
+    if list.len() % 2 == 1 {
+        list.extend_from_within(..);
+    }
+    if list.is_empty() || list.len() > MAX_DASHES || !list.iter().all(|x| (0.0..=255.0).contains(x))
+    {
+        return None;
+    }
+    if list.iter().all(|x| x.round() == 0.0) {
+        return Some(None);
+    }
+    let mut out = [0u8; MAX_DASHES];
+    for (i, x) in list.iter().enumerate() {
+        out[i] = x.round() as u8;
+    }
+    // A two-value pattern fills all four slots, so the shader reads one layout.
+    if list.len() == 2 {
+        out[2] = out[0];
+        out[3] = out[1];
+    }
+    Some(Some(out))
+}
+
 /// A vertical limit from `key` (in `unit`), or EUROCONTROL's pair (`LOWERLIMIT` "195" with
 /// `LOWERUNIT` "FL"): the metres if it parses, and the value as found.
 fn limit(
@@ -411,6 +509,9 @@ pub const KEYS: &[&str] = &[
     "stroke",
     "stroke-width",
     "stroke-opacity",
+    "stroke-linejoin",
+    "stroke-linecap",
+    "stroke-dasharray",
     "fill",
     "fill-opacity",
     "marker-color",
@@ -508,6 +609,42 @@ mod tests {
         assert!(StyleRules::from_fragment("strok=1").is_err());
         assert!(StyleRules::from_fragment("stroke").is_err());
         assert!(StyleRules::from_fragment("stroke=%zz").is_err());
+    }
+
+    #[test]
+    fn joins_caps_and_dashes_parse_as_svg_writes_them() {
+        let mut w = Vec::new();
+        let s = StyleRules::default().resolve(
+            &props(json!({"stroke-linejoin": "miter", "stroke-linecap": "butt",
+                "stroke-dasharray": "8, 4"})),
+            &mut w,
+        );
+        assert_eq!(s.line_join, LineJoin::Miter);
+        assert_eq!(s.line_cap, LineCap::Butt);
+        assert_eq!(s.dash_px, Some([8, 4, 8, 4]));
+        let s = StyleRules::default().resolve(&props(json!({"stroke-dasharray": [6]})), &mut w);
+        assert_eq!(s.dash_px, Some([6, 6, 6, 6]));
+        let s =
+            StyleRules::default().resolve(&props(json!({"stroke-dasharray": "9 3 2 3"})), &mut w);
+        assert_eq!(s.dash_px, Some([9, 3, 2, 3]));
+        let s = StyleRules::default().resolve(&props(json!({"stroke-dasharray": "0 0"})), &mut w);
+        assert_eq!(s.dash_px, None);
+        assert!(w.is_empty(), "{w:?}");
+        for bad in [
+            json!({"stroke-dasharray": "1 2 3 4 5 6"}),
+            json!({"stroke-dasharray": "4 -1"}),
+            json!({"stroke-dasharray": "4 x"}),
+            json!({"stroke-dasharray": 300}),
+            json!({"stroke-linejoin": "pointy"}),
+            json!({"stroke-linecap": 3}),
+        ] {
+            let mut w = Vec::new();
+            assert_eq!(
+                StyleRules::default().resolve(&props(bad.clone()), &mut w),
+                Style::default()
+            );
+            assert_eq!(w.len(), 1, "{bad}: {w:?}");
+        }
     }
 
     #[test]

@@ -7,7 +7,7 @@ use globus_terrain::TileMesh;
 use globus_vector::shape::{self, Position, Straight};
 use globus_vector::{Clamp, DrapeSurface, Feature, Rgba};
 
-use super::gpu::{FillVertex, LineInstance};
+use super::gpu::{FillVertex, LineInstance, LineLook, push_run};
 
 /// Densification tolerance: drawn lines pass within this of their true path, metres.
 pub(crate) const PATH_TOLERANCE_M: f64 = 1.0;
@@ -38,13 +38,50 @@ pub(crate) struct Draped {
     pub points: Vec<DrapedPoint>,
 }
 
-/// A line to drape: its densified positions, bounds, colour and width in pixels.
+/// A line to drape: its densified positions, metres along it at each, bounds and look.
 #[derive(Clone, Debug)]
 pub(crate) struct DrapedLine {
     pub pts: Vec<[f64; 2]>,
+    pub along: Vec<f64>,
     pub bbox: Bbox,
-    pub colour: Rgba,
-    pub width_px: f32,
+    pub look: LineLook,
+    /// A ring: it has no ends to cap.
+    pub closed: bool,
+}
+
+impl DrapedLine {
+    /// The line through `pts` (degrees) on `ellipsoid`.
+    fn new(pts: Vec<[f64; 2]>, ellipsoid: &Ellipsoid, look: LineLook, closed: bool) -> Self {
+        let on = |p: &[f64; 2]| {
+            ellipsoid.cartographic_to_ecef(Cartographic::new(
+                p[0].to_radians(),
+                p[1].to_radians(),
+                0.0,
+            ))
+        };
+        let world: Vec<DVec3> = pts.iter().map(on).collect();
+        Self {
+            bbox: Bbox::of(pts.iter().copied()),
+            along: cumulative_length(&world),
+            pts,
+            look,
+            closed,
+        }
+    }
+}
+
+/// Metres along a polyline at each of its points (chords: densified lines are within a
+/// metre of their curves).
+fn cumulative_length(pts: &[DVec3]) -> Vec<f64> {
+    let mut total = 0.0;
+    let mut out = Vec::with_capacity(pts.len());
+    for (i, p) in pts.iter().enumerate() {
+        if i > 0 {
+            total += (*p - pts[i - 1]).length();
+        }
+        out.push(total);
+    }
+    out
 }
 
 /// A fill to drape: its tessellated triangles, bounds and colour.
@@ -154,8 +191,7 @@ pub(crate) fn build(
     let ground = style.clamp == Clamp::Ground;
     let mut chunks = ChunkWriter::default();
     let stroke = Stroke {
-        colour: style.stroke,
-        width_px: style.stroke_width_px,
+        look: LineLook::of(style),
         path: style.path,
         id,
     };
@@ -207,7 +243,7 @@ pub(crate) fn build(
         }
         stroke.add(
             line,
-            ground,
+            (ground, false),
             ellipsoid,
             &world,
             &mut chunks,
@@ -262,7 +298,7 @@ pub(crate) fn build(
                 closed.push(r[0]);
                 stroke.add(
                     &closed,
-                    ground,
+                    (ground, true),
                     ellipsoid,
                     &world,
                     &mut chunks,
@@ -307,19 +343,18 @@ pub(crate) fn build(
 
 /// How a line is stroked.
 struct Stroke {
-    colour: Rgba,
-    width_px: f32,
+    look: LineLook,
     path: globus_vector::PathKind,
     id: u32,
 }
 
 impl Stroke {
-    /// Adds a line: draped (densified linear in longitude/latitude, cut along the tiles
-    /// when drawn) or at altitude (densified in 3D chords, in chunks).
+    /// Adds a line (a ring if `closed`): draped (densified linear in longitude/latitude,
+    /// cut along the tiles when drawn) or at altitude (densified in 3D chords, in chunks).
     fn add(
         &self,
         pts: &[Position],
-        ground: bool,
+        (ground, closed): (bool, bool),
         ellipsoid: &Ellipsoid,
         world: &dyn Fn(Position) -> DVec3,
         chunks: &mut ChunkWriter,
@@ -333,15 +368,12 @@ impl Stroke {
         let d = shape::densify(ellipsoid, pts, false, self.path, straight, PATH_TOLERANCE_M);
         if ground {
             let pts: Vec<[f64; 2]> = d.iter().map(|p| [p[0], p[1]]).collect();
-            draped.lines.push(DrapedLine {
-                bbox: Bbox::of(pts.iter().copied()),
-                pts,
-                colour: self.colour,
-                width_px: self.width_px,
-            });
+            draped
+                .lines
+                .push(DrapedLine::new(pts, ellipsoid, self.look, closed));
         } else {
             let w: Vec<DVec3> = d.iter().map(|&p| world(p)).collect();
-            chunks.line(&w, self.id, self.colour, self.width_px);
+            chunks.line(&w, self.id, &self.look, closed);
         }
     }
 }
@@ -377,6 +409,10 @@ fn volume(
     ]);
     // Edges unless asked for none (stroke-width 0).
     let width = style.stroke_width_px;
+    let look = LineLook {
+        colour: edge,
+        ..LineLook::of(style)
+    };
     for r in rings {
         let n = r.len();
         for i in 0..n {
@@ -393,24 +429,20 @@ fn volume(
         }
         // Vertical edges at the polygon's own vertices (not the densified ones).
         for c in corners.iter().flatten() {
-            chunks.line(&[at(*c, lower), at(*c, upper)], id, edge, width);
+            chunks.line(&[at(*c, lower), at(*c, upper)], id, &look, false);
         }
         for h in [lower, upper] {
             let mut pts: Vec<DVec3> = r.iter().map(|&p| at(p, h)).collect();
             pts.push(at(r[0], h));
-            chunks.line(&pts, id, edge, width);
+            chunks.line(&pts, id, &look, true);
         }
         // Where it stands on the ground (from the surface up), its footprint on the terrain.
         if lower <= 0.0 && upper > 0.0 {
             let mut pts: Vec<[f64; 2]> = r.iter().map(|p| [p[0], p[1]]).collect();
             pts.push([r[0][0], r[0][1]]);
-            let b = Bbox::of(pts.iter().copied());
-            draped.lines.push(DrapedLine {
-                pts,
-                bbox: b,
-                colour: edge,
-                width_px: width,
-            });
+            draped
+                .lines
+                .push(DrapedLine::new(pts, ellipsoid, look, true));
         }
     }
     let world = |p: Position| at(p, p[2]);
@@ -571,11 +603,25 @@ impl ChunkWriter {
         self.current.get_or_insert_with(Chunk::default)
     }
 
-    fn line(&mut self, pts: &[DVec3], id: u32, colour: Rgba, width: f32) {
-        for w in pts.windows(2) {
-            let c = self.chunk_for(w[0]);
-            let (a, b) = (w[0] - c.origin, w[1] - c.origin);
-            c.lines.push(LineInstance::segment(a, b, id, colour, width));
+    /// A polyline (a ring if `closed`), in runs of joined segments, one per chunk it
+    /// passes through.
+    fn line(&mut self, pts: &[DVec3], id: u32, look: &LineLook, closed: bool) {
+        let along = cumulative_length(pts);
+        let mut local = Vec::new();
+        let mut i = 0;
+        while i + 1 < pts.len() {
+            let c = self.chunk_for(pts[i]);
+            let origin = c.origin;
+            // The run goes on while its segments start inside this chunk.
+            let mut j = i + 1;
+            while j + 1 < pts.len() && (pts[j] - origin).abs().max_element() < CHUNK_EXTENT_M {
+                j += 1;
+            }
+            local.clear();
+            local.extend(pts[i..=j].iter().map(|&p| p - origin));
+            let ends = (i == 0 && !closed, j + 1 == pts.len() && !closed);
+            push_run(&mut c.lines, &local, &along[i..=j], id, look, ends);
+            i = j;
         }
     }
 
@@ -700,17 +746,34 @@ impl TileDrape {
     pub(crate) fn add(&mut self, surface: &DrapeSurface, id: u32, d: &Draped) {
         let rect = surface.rect_deg();
         let mut segs = Vec::new();
+        let (mut run, mut metres) = (Vec::new(), Vec::new());
         for l in &d.lines {
             if !l.bbox.overlaps(rect) {
                 continue;
             }
+            let last = (l.pts.len() - 1) as f64;
+            let at = |f: f64| {
+                let i = (f.floor().max(0.0) as usize).min(l.along.len().saturating_sub(2));
+                let t = f - i as f64;
+                l.along[i] + (l.along[(i + 1).min(l.along.len() - 1)] - l.along[i]) * t
+            };
             for shift in surface.shifts(l.bbox.lon[0], l.bbox.lon[1]) {
                 segs.clear();
                 surface.drape_line(&l.pts, shift, &mut segs);
-                self.lines.extend(
-                    segs.iter()
-                        .map(|s| LineInstance::segment(s[0], s[1], id, l.colour, l.width_px)),
-                );
+                // Runs of pieces that meet end to end.
+                for piece in segs.chunk_by(|x, y| x.along[1] == y.along[0]) {
+                    run.clear();
+                    metres.clear();
+                    run.push(piece[0].a);
+                    run.extend(piece.iter().map(|s| s.b));
+                    metres.push(at(piece[0].along[0]));
+                    metres.extend(piece.iter().map(|s| at(s.along[1])));
+                    let ends = (
+                        !l.closed && piece[0].along[0] == 0.0,
+                        !l.closed && piece[piece.len() - 1].along[1] == last,
+                    );
+                    push_run(&mut self.lines, &run, &metres, id, &l.look, ends);
+                }
             }
         }
         let mut tris = Vec::new();

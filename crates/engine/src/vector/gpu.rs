@@ -1,5 +1,6 @@
 //! The vector overlay's GPU side: two pipelines (fills; lines and points as screen-space
-//! capsules) drawing from a pool that mirrors the CPU pieces.
+//! quads, a segment reading its neighbours for its joins) drawing from a pool that mirrors
+//! the CPU pieces.
 //!
 //! The pool holds, per *entry* (a drawn tile's draped pieces, or one chunk of a feature's
 //! geometry at altitude), a range of the line buffer (a storage buffer the vertex shader
@@ -17,7 +18,7 @@ use bytemuck::{Pod, Zeroable};
 use globus_geo::DVec3;
 use globus_render::RangeAllocator;
 use globus_tiling::TileKey;
-use globus_vector::Rgba;
+use globus_vector::{LineCap, LineJoin, Rgba};
 use rustc_hash::FxHashMap;
 
 use crate::overlay::FrameContext;
@@ -40,13 +41,112 @@ pub(crate) struct LineInstance {
     pub outline: u32,
     pub width_px: f32,
     pub outline_px: f32,
-    /// A point's icon: its layer in the icon array plus one (0: none).
-    pub icon: u32,
-    pub pad: [u32; 3],
+    /// Low 16 bits: a point's icon, its layer in the icon array plus one (0: none); high 16
+    /// bits: a segment's [`line_flags`].
+    pub icon_flags: u32,
+    /// Metres along the line at `a` and `b`, less a multiple of [`ALONG_PERIOD_M`] (dashes).
+    pub along: [f32; 2],
+    /// Dash pattern, pixels, one per byte (dash, gap, dash, gap); 0: solid.
+    pub dash: u32,
 }
+
+/// Bits of [`LineInstance::icon_flags`] (from bit 16) saying how a segment meets its
+/// neighbours; mirrored in `vector.wgsl`.
+pub(crate) mod line_flags {
+    /// The record before this one continues the line into this segment's start.
+    pub const JOINED_PREV: u32 = 1 << 16;
+    /// The record after this one continues the line from this segment's end.
+    pub const JOINED_NEXT: u32 = 1 << 17;
+    /// The start is the line's own start (drawn with its cap).
+    pub const START: u32 = 1 << 18;
+    /// The end is the line's own end.
+    pub const END: u32 = 1 << 19;
+    /// Join: bits 20-21 (0 round, 1 miter, 2 bevel).
+    pub const JOIN_SHIFT: u32 = 20;
+    /// Cap: bits 22-23 (0 round, 1 butt, 2 square).
+    pub const CAP_SHIFT: u32 = 22;
+}
+
+/// Distances along lines are stored modulo this (2^21 m): every power-of-two dash period up
+/// to it repeats within it, so dash phases stay continuous, and f32 keeps 0.125 m of
+/// precision however long the line (a route across the world).
+pub(crate) const ALONG_PERIOD_M: f64 = 2_097_152.0;
 
 fn f32x3(p: DVec3) -> [f32; 3] {
     [p.x as f32, p.y as f32, p.z as f32]
+}
+
+/// How a line is drawn, per segment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LineLook {
+    pub colour: Rgba,
+    pub width_px: f32,
+    pub join: LineJoin,
+    pub cap: LineCap,
+    /// Packed dash pattern (0: solid).
+    pub dash: u32,
+}
+
+impl LineLook {
+    /// How `style` strokes lines.
+    pub(crate) fn of(style: &globus_vector::Style) -> Self {
+        Self {
+            colour: style.stroke,
+            width_px: style.stroke_width_px,
+            join: style.line_join,
+            cap: style.line_cap,
+            dash: style.dash_px.map_or(0, u32::from_le_bytes),
+        }
+    }
+
+    fn style_bits(&self) -> u32 {
+        let join = match self.join {
+            LineJoin::Round => 0,
+            LineJoin::Miter => 1,
+            LineJoin::Bevel => 2,
+        };
+        let cap = match self.cap {
+            LineCap::Round => 0,
+            LineCap::Butt => 1,
+            LineCap::Square => 2,
+        };
+        (join << line_flags::JOIN_SHIFT) | (cap << line_flags::CAP_SHIFT)
+    }
+}
+
+/// Appends the segments of a polyline run (`pts`, metres along the line `along`) to `out`,
+/// joined to each other; `start` / `end`: the run begins / ends where the line itself does
+/// (else the break is drawn round, as where a line leaves a tile or a chunk).
+pub(crate) fn push_run(
+    out: &mut Vec<LineInstance>,
+    pts: &[DVec3],
+    along: &[f64],
+    id: u32,
+    look: &LineLook,
+    (start, end): (bool, bool),
+) {
+    let n = pts.len().saturating_sub(1);
+    for i in 0..n {
+        let mut flags = look.style_bits();
+        if i > 0 {
+            flags |= line_flags::JOINED_PREV;
+        } else if start {
+            flags |= line_flags::START;
+        }
+        if i + 1 < n {
+            flags |= line_flags::JOINED_NEXT;
+        } else if end {
+            flags |= line_flags::END;
+        }
+        let a = along[i].rem_euclid(ALONG_PERIOD_M);
+        let b = a + (along[i + 1] - along[i]);
+        out.push(LineInstance {
+            icon_flags: flags,
+            along: [a as f32, b as f32],
+            dash: look.dash,
+            ..LineInstance::segment(pts[i], pts[i + 1], id, look.colour, look.width_px)
+        });
+    }
 }
 
 impl LineInstance {
@@ -60,8 +160,9 @@ impl LineInstance {
             outline: colour.packed(),
             width_px,
             outline_px: 0.0,
-            icon: 0,
-            pad: [0; 3],
+            icon_flags: 0,
+            along: [0.0; 2],
+            dash: 0,
         }
     }
 
@@ -83,14 +184,18 @@ impl LineInstance {
             outline: outline.packed(),
             width_px: size_px,
             outline_px: if square { -outline_px } else { outline_px },
-            icon: 0,
-            pad: [0; 3],
+            icon_flags: 0,
+            along: [0.0; 2],
+            dash: 0,
         }
     }
 
     /// The point drawn with icon `icon` (layer plus one; 0 keeps the symbol).
     pub(crate) fn with_icon(self, icon: u32) -> Self {
-        Self { icon, ..self }
+        Self {
+            icon_flags: icon & 0xffff,
+            ..self
+        }
     }
 }
 

@@ -6,11 +6,13 @@
 //!   it lies exactly on the terrain drawn this frame at whatever level; each tile's pieces
 //!   are computed once when it is first drawn and kept while it stays cached. Fills are
 //!   tested a hair nearer than their depth (they share the terrain's planes); lines and
-//!   points are screen-space capsules whose visibility is decided at their centre line
+//!   points are screen-space quads (a segment reads its neighbours in the buffer for miter,
+//!   bevel or round joins; dashes follow metres along the line) whose visibility is decided
+//!   at their centre line
 //!   against the terrain's depth ([`crate::FrameContext::terrain_depth`]), so a line keeps its
 //!   full pixel width at any pitch and is hidden only by terrain genuinely in front.
 //! * Geometry at altitude (absolute heights, extruded volumes) is built once in ECEF f64,
-//!   split into chunks of at most 100 km, each with its own origin: f32 holds offsets only.
+//!   split into chunks of at most 1,000 km, each with its own origin: f32 holds offsets only.
 //! * Per frame, when nothing changed, the CPU writes the anchors' offsets from the eye (one
 //!   per drawn tile and chunk) and the uniforms: nothing else. When the drawn tiles or the
 //!   features change, only new entries (a tile's pieces, a feature's chunks) are uploaded

@@ -1,5 +1,5 @@
 // Vector overlay: draped and absolute fills (triangles) and lines and points (screen-space
-// capsules). Positions are f32 offsets from an anchor (a tile's centre, or a chunk centre of
+// quads; joins, caps and dashes decided per fragment). Positions are f32 offsets from an anchor (a tile's centre, or a chunk centre of
 // geometry at altitude) whose offset from the eye is computed in f64 on the CPU each frame.
 
 struct Frame {
@@ -120,8 +120,9 @@ fn composite_fs(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
 
 // ---- lines and points ----
 
-// One segment or point (mirrors `LineInstance`, 48 bytes), six vertices each: read by
-// vertex index, so every drawn entry's range is one record of a multi-draw.
+// One segment or point (mirrors `LineInstance`, 64 bytes), six vertices each: read by
+// vertex index, so every drawn entry's range is one record of a multi-draw, and a segment
+// reads its neighbours (the records before and after it) for its joins.
 struct Line {
     a: vec3<f32>,
     anchor: u32,
@@ -133,12 +134,26 @@ struct Line {
     width_px: f32,
     // Outline width, pixels; negative: a square symbol.
     outline_px: f32,
-    // A point's icon: its layer plus one (0: the symbol).
-    icon: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    // Low 16 bits: a point's icon, its layer plus one (0: the symbol); high 16: the flags
+    // below (`line_flags` in gpu.rs).
+    icon_flags: u32,
+    // Metres along the line at a and b (less a multiple of 2^21 m).
+    along_a: f32,
+    along_b: f32,
+    // Dash pattern, pixels, a byte each: dash, gap, dash, gap (0: solid).
+    dash: u32,
 }
+
+const JOINED_PREV: u32 = 0x10000u;
+const JOINED_NEXT: u32 = 0x20000u;
+const START: u32 = 0x40000u;
+const END: u32 = 0x80000u;
+const JOIN_SHIFT: u32 = 20u;
+const CAP_SHIFT: u32 = 22u;
+const ROUND: u32 = 0u;
+const MITER: u32 = 1u;
+const BUTT: u32 = 1u;
+const SQUARE: u32 = 2u;
 
 @group(0) @binding(3) var<storage, read> lines: array<Line>;
 @group(0) @binding(4) var icons: texture_2d_array<f32>;
@@ -153,6 +168,15 @@ struct LineOut {
     @location(4) @interpolate(flat) outline: vec4<f32>,
     @location(5) @interpolate(flat) id: u32,
     @location(6) @interpolate(flat) icon: u32,
+    // Per end: the normal (along the travel) of the line dividing this segment from its
+    // neighbour, zero where there is none; the outer side of the turn.
+    @location(7) @interpolate(flat) join_a: vec4<f32>,
+    @location(8) @interpolate(flat) join_b: vec4<f32>,
+    // How far the outer corner reaches along the outer side at each end (a bevel; huge for a
+    // miter); metres along the line at a and b.
+    @location(9) @interpolate(flat) reach_along: vec4<f32>,
+    // Flags (ends and styles), dash pattern.
+    @location(10) @interpolate(flat) flags_dash: vec2<u32>,
 }
 
 // Eye-space depth below which a line end is moved along the line (in front of the camera).
@@ -163,42 +187,115 @@ fn to_pixels(clip: vec4<f32>) -> vec2<f32> {
     return vec2<f32>((ndc.x * 0.5 + 0.5) * frame.viewport.x, (0.5 - ndc.y * 0.5) * frame.viewport.y);
 }
 
+fn project(anchor: u32, p: vec3<f32>) -> vec4<f32> {
+    return frame.clip_from_eye * vec4<f32>(anchors[anchor].xyz + p, 1.0);
+}
+
+// Unit direction from one screen point to another; zero if they (nearly) coincide.
+fn direction(p0: vec2<f32>, p1: vec2<f32>) -> vec2<f32> {
+    let d = p1 - p0;
+    let len = length(d);
+    if (len > 1e-4) {
+        return d / len;
+    }
+    return vec2<f32>(0.0);
+}
+
+struct Join {
+    // Normal of the dividing line, along the travel, and the outer side; zero: no join.
+    e_o: vec4<f32>,
+    reach: f32,
+}
+
+// The join where direction `din` turns into `dout` (both segments compute it from the same
+// values, so they divide the plane along the same line and neither overlaps the other).
+fn join_at(din: vec2<f32>, dout: vec2<f32>, hw: f32, style: u32) -> Join {
+    var j: Join;
+    j.reach = 1e30;
+    let sum = din + dout;
+    if (length(sum) < 1e-3 || all(din == vec2<f32>(0.0)) || all(dout == vec2<f32>(0.0))) {
+        j.e_o = vec4<f32>(0.0); // a reversal or a degenerate end: drawn round
+        return j;
+    }
+    let e = normalize(sum);
+    let m = vec2<f32>(-e.y, e.x);
+    let cos_half = abs(dot(m, vec2<f32>(-dout.y, dout.x)));
+    let side = dot(m, din - dout);
+    var o = vec2<f32>(0.0);
+    if (side != 0.0) {
+        o = m * sign(side);
+    }
+    // A miter until its tip would pass twice the half width (MapLibre's limit 2), then a
+    // bevel; a bevel joins the outer corners.
+    if (style != MITER || cos_half < 0.5) {
+        j.reach = hw * cos_half;
+    }
+    j.e_o = vec4<f32>(e, o);
+    return j;
+}
+
 @vertex
 fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
-    let v = lines[vertex / 6u];
+    let index = vertex / 6u;
+    let v = lines[index];
     var out: LineOut;
-    let anchor = anchors[v.anchor].xyz;
-    var ca = frame.clip_from_eye * vec4<f32>(anchor + v.a, 1.0);
-    var cb = frame.clip_from_eye * vec4<f32>(anchor + v.b, 1.0);
+    var ca = project(v.anchor, v.a);
+    var cb = project(v.anchor, v.b);
     if (ca.w < NEAR_W && cb.w < NEAR_W) {
         out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0); // behind the camera: outside the frame
         return out;
     }
+    var flags = v.icon_flags & 0xffff0000u;
     if (ca.w < NEAR_W) {
         ca = mix(ca, cb, (NEAR_W - ca.w) / (cb.w - ca.w));
+        flags &= ~(JOINED_PREV | START);
     } else if (cb.w < NEAR_W) {
         cb = mix(cb, ca, (NEAR_W - cb.w) / (ca.w - cb.w));
+        flags &= ~(JOINED_NEXT | END);
     }
     let sa = to_pixels(ca);
     let sb = to_pixels(cb);
-    let delta = sb - sa;
-    let len = length(delta);
-    var d = vec2<f32>(1.0, 0.0);
-    if (len > 1e-4) {
-        d = delta / len;
+    let dir = direction(sa, sb);
+    var d = dir;
+    if (all(d == vec2<f32>(0.0))) {
+        d = vec2<f32>(1.0, 0.0);
     }
     let n = vec2<f32>(-d.y, d.x);
-    // Half width plus a pixel for antialiasing (and the outline's reach).
-    let r = 0.5 * v.width_px + 1.0;
+    let hw = 0.5 * v.width_px;
+    let join = (flags >> JOIN_SHIFT) & 3u;
+    var ja = Join(vec4<f32>(0.0), 1e30);
+    var jb = Join(vec4<f32>(0.0), 1e30);
+    if ((flags & JOINED_PREV) != 0u) {
+        let cp = project(lines[index - 1u].anchor, lines[index - 1u].a);
+        if (cp.w >= NEAR_W) {
+            ja = join_at(direction(to_pixels(cp), sa), dir, hw, join);
+        }
+    }
+    if ((flags & JOINED_NEXT) != 0u) {
+        let cn = project(lines[index + 1u].anchor, lines[index + 1u].b);
+        if (cn.w >= NEAR_W) {
+            jb = join_at(dir, direction(sb, to_pixels(cn)), hw, join);
+        }
+    }
+    // Half width plus a pixel for antialiasing across; along, room for a miter's tip.
+    let r = hw + 1.0;
+    var ext_a = r;
+    var ext_b = r;
+    if (any(ja.e_o.xy != vec2<f32>(0.0))) {
+        ext_a += hw;
+    }
+    if (any(jb.e_o.xy != vec2<f32>(0.0))) {
+        ext_b += hw;
+    }
     // Two triangles: corners (along, across) in {-1, 1}.
     let corners = array<vec2<f32>, 6>(
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
     );
     let c = corners[vertex % 6u];
-    var base = sa - d * r;
+    var base = sa - d * ext_a;
     if (c.x > 0.0) {
-        base = sb + d * r;
+        base = sb + d * ext_b;
     }
     let p = base + n * (c.y * r);
     let ndc = vec2<f32>(p.x * frame.viewport.z * 2.0 - 1.0, 1.0 - p.y * frame.viewport.w * 2.0);
@@ -212,7 +309,11 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     out.colour = unpack_colour(v.colour);
     out.outline = unpack_colour(v.outline);
     out.id = v.id;
-    out.icon = v.icon;
+    out.icon = v.icon_flags & 0xffffu;
+    out.join_a = ja.e_o;
+    out.join_b = jb.e_o;
+    out.reach_along = vec4<f32>(ja.reach, jb.reach, v.along_a, v.along_b);
+    out.flags_dash = vec2<u32>(flags, v.dash);
     return out;
 }
 
@@ -225,25 +326,120 @@ fn terrain_at(t: vec2<i32>) -> f32 {
     return textureLoad(terrain_depth, t, 0).r;
 }
 
+// Distance deciding coverage (coverage = half width + 0.5 - distance) beyond one end of a
+// segment, `beyond` pixels past its vertex `v`, `across` pixels off its centre line.
+fn end_distance(
+    p: vec2<f32>,
+    v: vec2<f32>,
+    beyond: f32,
+    across: f32,
+    hw: f32,
+    join: vec4<f32>,
+    reach: f32,
+    flags: u32,
+    is_end: bool,
+) -> f32 {
+    if (any(join.xy != vec2<f32>(0.0))) {
+        if (((flags >> JOIN_SHIFT) & 3u) == ROUND) {
+            return length(p - v);
+        }
+        // Miter (the slab up to the dividing line) or bevel (cut across the outer corner).
+        return max(across, hw - reach + dot(p - v, join.zw));
+    }
+    if (is_end) {
+        let cap = (flags >> CAP_SHIFT) & 3u;
+        if (cap == BUTT) {
+            return max(across, hw + beyond);
+        }
+        if (cap == SQUARE) {
+            return max(across, beyond);
+        }
+    }
+    // A round cap, or a break where the line leaves a tile or a chunk.
+    return length(p - v);
+}
+
+// Signed distance, pixels, from `u` (pattern pixels at nominal scale, `scale` drawn pixels
+// each) to the dashes of `dash`: negative inside a dash.
+fn dash_signed(u: f32, dash: u32, scale: f32) -> f32 {
+    let l = vec4<f32>(unpack4xU8(dash));
+    let total = l.x + l.y + l.z + l.w;
+    var best = 1e30;
+    for (var k = -1; k <= 1; k++) {
+        let x = u - f32(k) * total;
+        let s0 = max(-x, x - l.x);
+        let s1 = max(l.x + l.y - x, x - (l.x + l.y + l.z));
+        best = min(best, min(s0, s1));
+    }
+    return best * scale;
+}
+
+// Coverage of the dashes at a fragment `metres` along the line, `across` pixels off it.
+// The pattern's period in metres is the power of two nearest to what the segment's pixels
+// per metre ask for: the same on every segment and in every tile, so dashes stay put on the
+// ground as the camera moves and continue across tile borders; they are drawn between 0.71
+// and 1.41 times their size, and halve or double as the scale passes a power of two.
+// (MapLibre cross-fades between zoom levels over time; a cross-fade in space would show two
+// patterns at once in a still picture.)
+fn dash_coverage(metres: f32, px_per_m: f32, across: f32, hw: f32, dash: u32, cap: u32) -> f32 {
+    let l = vec4<f32>(unpack4xU8(dash));
+    let total = l.x + l.y + l.z + l.w;
+    let period = exp2(round(log2(total / px_per_m)));
+    let u = fract(metres / period) * total;
+    let s = dash_signed(u, dash, period * px_per_m / total);
+    var dist = max(across, hw + s);
+    if (cap == ROUND) {
+        dist = length(vec2<f32>(max(s, 0.0), across));
+    } else if (cap == SQUARE) {
+        dist = max(across, s);
+    }
+    return clamp(hw + 0.5 - dist, 0.0, 1.0);
+}
+
 @fragment
 fn line_fs(in: LineOut) -> Target {
     let p = in.clip.xy;
     let ab = in.sb - in.sa;
-    let l2 = dot(ab, ab);
-    var t = 0.0;
-    if (l2 > 1e-8) {
-        t = clamp(dot(p - in.sa, ab) / l2, 0.0, 1.0);
+    let len = length(ab);
+    var d = vec2<f32>(1.0, 0.0);
+    if (len > 1e-4) {
+        d = ab / len;
     }
+    let along_px = dot(p - in.sa, d);
+    let across = abs(dot(p - in.sa, vec2<f32>(-d.y, d.x)));
+    let t = clamp(along_px / max(len, 1e-4), 0.0, 1.0);
     let centre = in.sa + ab * t;
     let width = in.za_zb_w_o.z;
+    let hw = 0.5 * width;
     let outline_px = in.za_zb_w_o.w;
+    let flags = in.flags_dash.x;
     let off = abs(p - centre);
     var dist = length(p - centre);
     if (outline_px < 0.0) {
         dist = max(off.x, off.y);
     }
-    let r = 0.5 * width;
-    let coverage = clamp(r + 0.5 - dist, 0.0, 1.0);
+    if ((flags & (JOINED_PREV | JOINED_NEXT | START | END)) != 0u) {
+        // A line's segment: the slab between its ends, each end joined, capped or round.
+        if (dot(p - in.sa, in.join_a.xy) < 0.0 || dot(p - in.sb, in.join_b.xy) > 0.0) {
+            discard; // the neighbour's side of the dividing line
+        }
+        dist = across;
+        if (along_px < 0.0) {
+            dist = end_distance(p, in.sa, -along_px, across, hw, in.join_a,
+                in.reach_along.x, flags, (flags & START) != 0u);
+        } else if (along_px > len) {
+            dist = end_distance(p, in.sb, along_px - len, across, hw, in.join_b,
+                in.reach_along.y, flags, (flags & END) != 0u);
+        }
+    }
+    var coverage = clamp(hw + 0.5 - dist, 0.0, 1.0);
+    let metres_len = in.reach_along.w - in.reach_along.z;
+    if (in.flags_dash.y != 0u && len > 1e-3 && metres_len > 1e-6) {
+        let px_per_m = len / metres_len;
+        let metres = in.reach_along.z + along_px / px_per_m;
+        let cap = (flags >> CAP_SHIFT) & 3u;
+        coverage = min(coverage, dash_coverage(metres, px_per_m, across, hw, in.flags_dash.y, cap));
+    }
     if (coverage <= 0.0) {
         discard;
     }
@@ -272,7 +468,7 @@ fn line_fs(in: LineOut) -> Target {
     }
     var colour = in.colour;
     let ow = abs(outline_px);
-    if (ow > 0.0 && dist > r - ow) {
+    if (ow > 0.0 && dist > hw - ow) {
         colour = in.outline;
     }
     return Target(vec4<f32>(colour.rgb, colour.a * coverage), in.id);
