@@ -1,6 +1,7 @@
 // Vector overlay: draped and absolute fills (triangles) and lines and points (screen-space
-// quads; joins, caps and dashes decided per fragment). Positions are f32 offsets from an anchor (a tile's centre, or a chunk centre of
-// geometry at altitude) whose offset from the eye is computed in f64 on the CPU each frame.
+// quads; joins, caps and dashes decided per fragment). Positions are f32 offsets from an
+// anchor (a tile's centre, or a chunk centre of geometry at altitude) whose offset from the
+// eye is computed in f64 on the CPU each frame.
 
 struct Frame {
     clip_from_eye: mat4x4<f32>,
