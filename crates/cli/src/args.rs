@@ -41,6 +41,11 @@ pub enum Command {
         #[command(subcommand)]
         command: TileCommand,
     },
+    /// Air traffic records: make synthetic ones, summarise any.
+    Traffic {
+        #[command(subcommand)]
+        command: crate::traffic_cmd::TrafficCommand,
+    },
     /// Build one tile's adaptive mesh from an elevation PNG, or describe a quantized-mesh file.
     Mesh(MeshArgs),
     /// Geodesy and tile naming conversions.

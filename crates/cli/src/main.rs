@@ -10,6 +10,7 @@ mod mesh_cmd;
 mod path;
 mod render_cmd;
 mod tile_cmd;
+mod traffic_cmd;
 mod viewer;
 
 use std::time::Duration;
@@ -162,6 +163,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 TileCommand::Merge(a) => tile_cmd::merge(&a)?,
             };
             println!("{line}");
+            Ok(())
+        }
+        Command::Traffic { command } => {
+            println!("{}", traffic_cmd::run(command)?);
             Ok(())
         }
         Command::Mesh(args) => {

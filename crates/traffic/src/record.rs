@@ -139,6 +139,10 @@ pub struct Track {
     pub icao24: u32,
     /// The call sign (trimmed; empty when the record gives none).
     pub callsign: String,
+    /// The ICAO aircraft type designator (e.g. `A320`) from an optional `typecode` column
+    /// (OpenSky's aircraft database names it so; `globus traffic synth` writes it); empty when
+    /// unknown.
+    pub typecode: String,
     /// The reports.
     pub reports: Vec<Report>,
 }
@@ -151,6 +155,7 @@ impl Track {
         Track {
             icao24,
             callsign: String::new(),
+            typecode: String::new(),
             reports: Vec::new(),
         }
     }
@@ -201,6 +206,28 @@ impl Record {
             });
         }
         span
+    }
+
+    /// The most flights in the air (between their first and last report) at one moment,
+    /// and the first moment it happens; `(0, NaN)` for an empty record.
+    pub fn most_at_once(&self) -> (usize, f64) {
+        let mut events: Vec<(f64, i32)> = Vec::with_capacity(self.tracks.len() * 2);
+        for t in &self.tracks {
+            if let (Some(a), Some(b)) = (t.reports.first(), t.reports.last()) {
+                events.push((a.time_s, 1));
+                events.push((b.time_s, -1));
+            }
+        }
+        // Starts before ends at the same moment: a flight seen at t counts at t.
+        events.sort_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)));
+        let (mut now, mut best) = (0i64, (0usize, f64::NAN));
+        for (time, step) in events {
+            now += i64::from(step);
+            if now as usize > best.0 {
+                best = (now as usize, time);
+            }
+        }
+        best
     }
 
     /// How many rows of `kind` were skipped.
@@ -272,6 +299,7 @@ struct Columns {
     callsign: Option<usize>,
     onground: Option<usize>,
     lastposupdate: Option<usize>,
+    typecode: Option<usize>,
 }
 
 impl Columns {
@@ -295,6 +323,7 @@ impl Columns {
             callsign: index("callsign"),
             onground: index("onground"),
             lastposupdate: index("lastposupdate"),
+            typecode: index("typecode"),
         };
         if columns.geo_alt.is_none() && columns.baro_alt.is_none() {
             return Err("no baroaltitude or geoaltitude column".into());
@@ -385,7 +414,7 @@ fn read_csv(input: impl Read, name: &Path) -> Result<Record, RecordError> {
         }
         rows += 1;
         line = row.position().map_or(line + 1, |p| p.line());
-        let (icao24, callsign, report) = match parse_row(&row, &columns) {
+        let (icao24, Names { callsign, typecode }, report) = match parse_row(&row, &columns) {
             Ok(parsed) => parsed,
             Err(bad) => {
                 skips.add(bad, line);
@@ -418,6 +447,9 @@ fn read_csv(input: impl Read, name: &Path) -> Result<Record, RecordError> {
         let track = &mut tracks[slot];
         if let (Some(c), true) = (callsign, track.callsign.is_empty()) {
             track.callsign = c.to_owned();
+        }
+        if let (Some(c), true) = (typecode, track.typecode.is_empty()) {
+            track.typecode = c.to_owned();
         }
         track.reports.push(report);
     }
@@ -517,10 +549,13 @@ fn address(row: &csv::ByteRecord, index: usize) -> Result<u32, Bad> {
 /// Earliest and latest times accepted: 1970 to 2200.
 const TIME_RANGE_S: (f64, f64) = (0.0, 7.3e9);
 
-fn parse_row<'r>(
-    row: &'r csv::ByteRecord,
-    c: &Columns,
-) -> Result<(u32, Option<&'r str>, Report), Bad> {
+/// A row's text cells that name its flight.
+struct Names<'r> {
+    callsign: Option<&'r str>,
+    typecode: Option<&'r str>,
+}
+
+fn parse_row<'r>(row: &'r csv::ByteRecord, c: &Columns) -> Result<(u32, Names<'r>, Report), Bad> {
     let icao24 = address(row, c.icao24)?;
     let time = needed(row, c.time, "time")?;
     let lat = needed(row, c.lat, "lat")?;
@@ -573,11 +608,16 @@ fn parse_row<'r>(
         )?,
         on_ground,
     };
-    let callsign = c
-        .callsign
-        .and_then(|i| cell(row, i))
-        .and_then(|b| std::str::from_utf8(b).ok());
-    Ok((icao24, callsign, report))
+    let text = |index: Option<usize>| {
+        index
+            .and_then(|i| cell(row, i))
+            .and_then(|b| std::str::from_utf8(b).ok())
+    };
+    let names = Names {
+        callsign: text(c.callsign),
+        typecode: text(c.typecode),
+    };
+    Ok((icao24, names, report))
 }
 
 #[cfg(test)]
