@@ -83,6 +83,12 @@ pub struct MergeArgs {
 }
 
 fn parse_bounds(text: &str) -> anyhow::Result<GeoRect> {
+    let [w, s, e, n] = parse_bounds_deg(text)?;
+    Ok(GeoRect::from_degrees(w, s, e, n))
+}
+
+/// `--bounds W,S,E,N` as four numbers (degrees), checked only for being four numbers.
+pub(crate) fn parse_bounds_deg(text: &str) -> anyhow::Result<[f64; 4]> {
     let v: Vec<f64> = text
         .split(',')
         .map(|s| s.trim().parse::<f64>())
@@ -90,7 +96,7 @@ fn parse_bounds(text: &str) -> anyhow::Result<GeoRect> {
         .ok()
         .filter(|v: &Vec<f64>| v.len() == 4)
         .with_context(|| format!("--bounds {text:?} must be four numbers W,S,E,N in degrees"))?;
-    Ok(GeoRect::from_degrees(v[0], v[1], v[2], v[3]))
+    Ok([v[0], v[1], v[2], v[3]])
 }
 
 pub(crate) fn parse_scheme(name: &str) -> anyhow::Result<TilingScheme> {

@@ -84,24 +84,17 @@ pub fn format_time(unix_s: f64) -> String {
         .unwrap_or_else(|_| format!("{unix_s} s"))
 }
 
-fn parse_bounds(text: &str) -> anyhow::Result<[f64; 4]> {
-    let v: Vec<f64> = text
-        .split(',')
-        .map(|s| s.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .ok()
-        .filter(|v: &Vec<f64>| v.len() == 4)
-        .with_context(|| format!("--bounds {text:?} must be four numbers W,S,E,N in degrees"))?;
-    Ok([v[0], v[1], v[2], v[3]])
-}
-
 fn synth_cmd(a: &SynthArgs) -> anyhow::Result<String> {
     let options = SynthOptions {
         flights: a.flights,
         seed: a.seed,
         hours: a.hours,
         period_s: a.period_s,
-        bounds: a.bounds.as_deref().map(parse_bounds).transpose()?,
+        bounds: a
+            .bounds
+            .as_deref()
+            .map(crate::tile_cmd::parse_bounds_deg)
+            .transpose()?,
         start_unix_s: parse_time(&a.start, "--start")?.floor(),
     };
     let airports = synth::read_airports(&a.airports)?;

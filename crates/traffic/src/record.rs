@@ -285,6 +285,9 @@ fn read_up_to(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(got)
 }
 
+/// A needed column the header lacks.
+struct MissingColumn(&'static str);
+
 /// Where the columns are.
 struct Columns {
     time: usize,
@@ -303,13 +306,13 @@ struct Columns {
 }
 
 impl Columns {
-    fn find(header: &csv::ByteRecord) -> Result<Columns, String> {
+    fn find(header: &csv::ByteRecord) -> Result<Columns, MissingColumn> {
         let index = |name: &str| {
             header
                 .iter()
                 .position(|h| h.trim_ascii().eq_ignore_ascii_case(name.as_bytes()))
         };
-        let need = |name: &str| index(name).ok_or_else(|| format!("no {name} column"));
+        let need = |name: &'static str| index(name).ok_or(MissingColumn(name));
         let columns = Columns {
             time: need("time")?,
             icao24: need("icao24")?,
@@ -326,7 +329,7 @@ impl Columns {
             typecode: index("typecode"),
         };
         if columns.geo_alt.is_none() && columns.baro_alt.is_none() {
-            return Err("no baroaltitude or geoaltitude column".into());
+            return Err(MissingColumn("baroaltitude or geoaltitude"));
         }
         Ok(columns)
     }
@@ -391,7 +394,10 @@ fn read_csv(input: impl Read, name: &Path) -> Result<Record, RecordError> {
     let columns = Columns::find(&row).map_err(|why| {
         let shown = String::from_utf8_lossy(row.as_slice());
         let shown: String = shown.chars().take(60).collect();
-        not_csv(format!("{why}; the first line reads {shown:?}"))
+        not_csv(format!(
+            "no {} column; the first line reads {shown:?}",
+            why.0
+        ))
     })?;
 
     let mut tracks: Vec<Track> = Vec::new();
