@@ -137,6 +137,8 @@ pub struct Globe {
     near_cap_m: f64,
     /// Whether the last render's overlay passes wrote the id buffer.
     ids_written: bool,
+    /// Towards the sun in the last update (ECEF axes).
+    sun_direction: DVec3,
 }
 
 impl Globe {
@@ -215,6 +217,7 @@ impl Globe {
             camera: None,
             drawn_camera: None,
             ids_written: false,
+            sun_direction: DVec3::Z,
             near_cap_m: if backend == wgpu::Backend::Gl {
                 NEAR_PLANE_CAP_GL_M
             } else {
@@ -444,6 +447,7 @@ impl Globe {
         let lighting = self
             .lighting
             .unwrap_or_else(|| Self::default_lighting(view, &ellipsoid));
+        self.sun_direction = lighting.sun_direction;
         let tiles: Vec<TileKey> = self.selection.draw.iter().map(|d| d.key).collect();
         let draw = self.renderer.prepare(
             &self.device,
@@ -516,6 +520,7 @@ impl Globe {
             drawn: &self.selection.draw,
             layer: &self.layer,
             terrain_depth: targets.terrain_depth_view(),
+            sun_direction: self.sun_direction,
         };
         for o in overlays.iter_mut() {
             o.prepare(&frame);

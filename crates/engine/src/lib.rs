@@ -62,10 +62,12 @@ pub mod controller;
 mod error;
 mod frame;
 mod globe;
+mod gpu_util;
 mod headless;
 pub mod memory;
 pub mod overlay;
 mod query;
+pub mod traffic;
 pub mod vector;
 
 pub use builder::{DEFAULT_REQUEST_LOOKAHEAD_FRAMES, DEFAULT_SEED, GlobeBuilder, MIN_SSE_PX};
@@ -77,6 +79,7 @@ pub use globus_vector::{Feature, StyleRules};
 pub use headless::{Headless, RenderedFrame, holes_inside, save_png};
 pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};
+pub use traffic::{TrafficLayer, TrafficStats, TrafficStyle};
 pub use vector::{FeatureId, VectorLayer, VectorStats};
 
 pub use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid, View};

@@ -63,6 +63,7 @@ pub struct FrameContext<'a> {
     pub(crate) drawn: &'a [DrawTile],
     pub(crate) layer: &'a TerrainLayer,
     pub(crate) terrain_depth: &'a wgpu::TextureView,
+    pub(crate) sun_direction: DVec3,
 }
 
 impl FrameContext<'_> {
@@ -117,6 +118,12 @@ impl FrameContext<'_> {
     /// [`Overlay::wants_terrain_depth`] is true (it is copied only then).
     pub fn terrain_depth(&self) -> &wgpu::TextureView {
         self.terrain_depth
+    }
+
+    /// Towards the sun the terrain is lit by (unit, ECEF axes): overlays light their models
+    /// with it.
+    pub fn sun_direction(&self) -> DVec3 {
+        self.sun_direction
     }
 
     /// The ground height (true metres above the ellipsoid) at a longitude and latitude

@@ -1,14 +1,22 @@
-//! The engine's own shaders (the vector overlay's) parse and validate with naga, without a
-//! GPU.
+//! The engine's own shaders (the vector and traffic overlays') parse and validate with naga,
+//! without a GPU.
 
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 
-#[test]
-fn vector_shader_validates() {
-    let source = globus_engine::vector::SHADER;
+fn validate(name: &str, source: &str) {
     let module = naga::front::wgsl::parse_str(source)
-        .unwrap_or_else(|e| panic!("vector.wgsl: {}", e.emit_to_string(source)));
+        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
     Validator::new(ValidationFlags::all(), Capabilities::all())
         .validate(&module)
-        .unwrap_or_else(|e| panic!("vector.wgsl: {}", e.emit_to_string(source)));
+        .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+}
+
+#[test]
+fn vector_shader_validates() {
+    validate("vector.wgsl", globus_engine::vector::SHADER);
+}
+
+#[test]
+fn traffic_shader_validates() {
+    validate("traffic.wgsl", globus_engine::traffic::SHADER);
 }

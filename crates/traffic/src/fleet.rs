@@ -177,6 +177,10 @@ pub struct FleetOptions {
     pub trail_points: usize,
     /// Age of the oldest trail sample drawn, seconds.
     pub trail_s: f64,
+    /// Least time between two trail samples, seconds: samples closer to the previous trail
+    /// sample than this move the object but leave no trail point, so `trail_points` cover
+    /// `trail_s` whatever the report rate (64 points 10 s apart hold 10 minutes).
+    pub trail_spacing_s: f64,
 }
 
 impl Default for FleetOptions {
@@ -185,6 +189,7 @@ impl Default for FleetOptions {
             extrapolate_s: 20.0,
             trail_points: 64,
             trail_s: 600.0,
+            trail_spacing_s: 10.0,
         }
     }
 }
@@ -290,6 +295,10 @@ pub struct Fleet {
     trails: Vec<TrailPoint>,
     trail_heads: Vec<u32>,
     trail_lens: Vec<u32>,
+    /// Indices into `trails` written since [`Fleet::take_trail_writes`] last ran; cleared
+    /// (and `trails_rewritten` set) when it would outgrow the ring storage itself.
+    trail_writes: Vec<u32>,
+    trails_rewritten: bool,
     counts: FleetCounts,
 }
 
@@ -320,6 +329,60 @@ impl Fleet {
         self.slot_of.is_empty()
     }
 
+    /// Removes every object (slots, trails and counts are kept for reuse; counts go on).
+    pub fn clear(&mut self) {
+        let ids: Vec<u64> = self.slot_of.keys().copied().collect();
+        for id in ids {
+            self.remove(id);
+        }
+    }
+
+    /// The slot of a live object (its row in the GPU mirror of a drawing layer).
+    pub fn slot_of(&self, id: u64) -> Option<u32> {
+        self.slot_of.get(&id).copied()
+    }
+
+    /// The live object in a slot.
+    pub fn id_in_slot(&self, slot: u32) -> Option<u64> {
+        let s = slot as usize;
+        (*self.live.get(s)?).then(|| self.ids[s])
+    }
+
+    /// Slots the columns hold (live or free): slot numbers are below this.
+    pub fn slot_capacity(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Every slot's trail ring, `trail_points` per slot (slot `s` holds
+    /// `[s * trail_points, (s + 1) * trail_points)`); see [`Fleet::trail_ring`].
+    pub fn trail_storage(&self) -> &[TrailPoint] {
+        &self.trails
+    }
+
+    /// A slot's ring: the index (within the slot's part of [`Fleet::trail_storage`]) the
+    /// next point goes to, and how many points it holds (the newest is just before the
+    /// head, wrapping round).
+    pub fn trail_ring(&self, slot: u32) -> (u32, u32) {
+        let s = slot as usize;
+        match (self.trail_heads.get(s), self.trail_lens.get(s)) {
+            (Some(&h), Some(&l)) => (h, l),
+            _ => (0, 0),
+        }
+    }
+
+    /// Hands over the indices into [`Fleet::trail_storage`] written since the last call
+    /// (for mirrors such as a GPU copy), appending them to `out`. Returns `true` when more
+    /// was written than the log holds (the ring storage's size): then every point may have
+    /// changed and `out` is left as it was.
+    pub fn take_trail_writes(&mut self, out: &mut Vec<u32>) -> bool {
+        let all = std::mem::take(&mut self.trails_rewritten);
+        if !all {
+            out.extend_from_slice(&self.trail_writes);
+        }
+        self.trail_writes.clear();
+        all
+    }
+
     /// What applying batches did so far.
     pub fn counts(&self) -> FleetCounts {
         self.counts
@@ -346,7 +409,7 @@ impl Fleet {
             + self.options.trail_points * std::mem::size_of::<TrailPoint>();
         // The map: key, value and about one control byte per entry, at its capacity.
         let map = self.slot_of.capacity() * (8 + 4 + 1);
-        self.ids.capacity() * per_slot + map
+        self.ids.capacity() * per_slot + map + self.trail_writes.capacity() * 4
     }
 
     /// Applies one tick's batch: samples in order (an unknown id is an add), then removals.
@@ -406,7 +469,9 @@ impl Fleet {
     fn write_fields(&mut self, s: usize, b: &Batch, i: usize) {
         self.kinds[s] = b.kinds[i];
         self.colours[s] = b.colours[i];
-        self.flags[s] = b.flags[i] & !flags::STALE;
+        // Selection is the user's: updates keep it (and may set it).
+        let selected = self.flags[s] & flags::SELECTED;
+        self.flags[s] = (b.flags[i] & !flags::STALE) | selected;
         self.speeds[s] = b.speeds[i];
         self.callsigns[s] = b.callsigns[i];
     }
@@ -439,6 +504,7 @@ impl Fleet {
         };
         self.ids[slot] = id;
         self.live[slot] = true;
+        self.flags[slot] = 0;
         self.trail_heads[slot] = 0;
         self.trail_lens[slot] = 0;
         self.slot_of.insert(id, slot as u32);
@@ -448,7 +514,22 @@ impl Fleet {
     fn push_trail(&mut self, slot: usize, time_s: f64, position: [f64; 3]) {
         let n = self.options.trail_points;
         let head = self.trail_heads[slot] as usize;
-        self.trails[slot * n + head] = TrailPoint { time_s, position };
+        let len = self.trail_lens[slot] as usize;
+        if len > 0 {
+            let newest = self.trails[slot * n + (head + n - 1) % n];
+            if time_s - newest.time_s < self.options.trail_spacing_s {
+                return;
+            }
+        }
+        let index = slot * n + head;
+        self.trails[index] = TrailPoint { time_s, position };
+        if self.trail_writes.len() >= self.trails.len() {
+            self.trail_writes.clear();
+            self.trails_rewritten = true;
+        }
+        if !self.trails_rewritten {
+            self.trail_writes.push(index as u32);
+        }
         self.trail_heads[slot] = ((head + 1) % n) as u32;
         self.trail_lens[slot] = (self.trail_lens[slot] + 1).min(n as u32);
     }

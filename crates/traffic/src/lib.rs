@@ -3,12 +3,14 @@
 //! synthetic records between real airports ([`synth`]), and the aircraft kinds drawn
 //! ([`kind`]).
 //!
-//! This is the first part of the air-traffic issue: the replay clock, synthetic traffic, the
-//! columnar entity batches and their drawing build on these tracks.
+//! Records play against a clock ([`replay`]) into a [`Fleet`] of moving objects
+//! ([`fleet`]: columnar batches, interpolation, trails), which the engine's traffic layer
+//! draws.
 
 pub mod fleet;
 pub mod kind;
 pub mod record;
+pub mod replay;
 pub mod synth;
 
 pub use fleet::{Batch, Fleet, FleetError, FleetOptions, Sample, Sampled};
@@ -16,3 +18,4 @@ pub use kind::AircraftKind;
 pub use record::{
     FLIGHT_GAP_S, Record, RecordError, Report, Skip, SkipKind, Track, read_record, read_record_from,
 };
+pub use replay::{Replay, ReplayOptions, Step, altitude_colour};

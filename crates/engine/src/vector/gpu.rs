@@ -21,6 +21,7 @@ use globus_tiling::TileKey;
 use globus_vector::{LineCap, LineJoin, Rgba};
 use rustc_hash::FxHashMap;
 
+use crate::gpu_util::{Growing, buffer, buffer_entry, texture_entry};
 use crate::overlay::FrameContext;
 
 /// How much nearer than its depth a draped fill is tested, as a fraction of its depth: it
@@ -260,69 +261,6 @@ struct DrawArgs {
     instance_count: u32,
     first_vertex: u32,
     first_instance: u32,
-}
-
-/// A buffer that grows by doubling, keeping its contents (copied on the GPU).
-struct Growing {
-    buffer: wgpu::Buffer,
-    label: &'static str,
-    usage: wgpu::BufferUsages,
-}
-
-impl Growing {
-    fn new(
-        device: &wgpu::Device,
-        label: &'static str,
-        usage: wgpu::BufferUsages,
-        size: u64,
-    ) -> Self {
-        let usage = usage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
-        Self {
-            buffer: buffer(device, label, size, usage),
-            label,
-            usage,
-        }
-    }
-
-    /// Makes room for `bytes`, keeping what is there.
-    fn reserve(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: u64) -> bool {
-        if bytes <= self.buffer.size() {
-            return false;
-        }
-        let bigger = buffer(device, self.label, bytes.next_power_of_two(), self.usage);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("vector pool growth"),
-        });
-        encoder.copy_buffer_to_buffer(&self.buffer, 0, &bigger, 0, self.buffer.size());
-        queue.submit([encoder.finish()]);
-        self.buffer = bigger;
-        true
-    }
-
-    /// Writes `bytes` at the start, growing (without keeping) if needed.
-    fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, bytes: &[u8]) {
-        let need = (bytes.len() as u64).max(16);
-        if need > self.buffer.size() {
-            self.buffer = buffer(device, self.label, need.next_power_of_two(), self.usage);
-        }
-        if !bytes.is_empty() {
-            queue.write_buffer(&self.buffer, 0, bytes);
-        }
-    }
-}
-
-fn buffer(
-    device: &wgpu::Device,
-    label: &str,
-    size: u64,
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(16).div_ceil(16) * 16,
-        usage,
-        mapped_at_creation: false,
-    })
 }
 
 /// First capacities: lines (instances) and fill vertices.
@@ -1134,42 +1072,6 @@ fn icon_array(device: &wgpu::Device, queue: &wgpu::Queue, icons: &[Vec<u8>]) -> 
         dimension: Some(wgpu::TextureViewDimension::D2Array),
         ..Default::default()
     })
-}
-
-/// A buffer binding.
-fn buffer_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    ty: wgpu::BufferBindingType,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// A float texture read by fragment shaders.
-fn texture_entry(
-    binding: u32,
-    filterable: bool,
-    view_dimension: wgpu::TextureViewDimension,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension,
-            multisampled: false,
-        },
-        count: None,
-    }
 }
 
 /// A range of `len`, growing the allocator (doubling) when none is free.

@@ -163,4 +163,21 @@ fn selection_is_a_flag_that_survives_updates() {
     let mut out = Sampled::default();
     fleet.sample(0.0, &mut out);
     assert_ne!(out.flags[0] & flags::SELECTED, 0);
+    // A later sample (whose flags know nothing of the selection) keeps it.
+    fleet
+        .apply(&batch(&[sample(1, 10.0, 0.1, 0.0, 0.0, 0.0)], &[]))
+        .expect("apply");
+    fleet.sample(10.0, &mut out);
+    assert_ne!(out.flags[0] & flags::SELECTED, 0);
+    // A new object in the freed slot starts unselected.
+    fleet.remove(1);
+    fleet
+        .apply(&batch(&[sample(2, 10.0, 0.1, 0.0, 0.0, 0.0)], &[]))
+        .expect("apply");
+    fleet.sample(10.0, &mut out);
+    assert_eq!(out.flags[0] & flags::SELECTED, 0);
+    assert_eq!(
+        (fleet.slot_of(2), fleet.id_in_slot(0), fleet.id_in_slot(1)),
+        (Some(0), Some(2), None)
+    );
 }

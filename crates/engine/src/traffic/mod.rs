@@ -1,0 +1,617 @@
+//! [`TrafficLayer`]: the engine's built-in overlay for moving aircraft: a heading-oriented
+//! symbol of a few pixels far away, the aircraft's 3D model close in (never smaller than
+//! its symbol, cross-faded so nothing pops), and a trail of its last minutes fading with
+//! age.
+//!
+//! The CPU state is a [`Fleet`] (columnar, O(batch) updates, interpolation to the frame's
+//! moment, trail ring buffers); a [`Replay`] feeds it from a record ([`TrafficLayer::play`]).
+//! Per frame the layer samples every aircraft at the layer's time, places it (raised by the
+//! elevation exaggeration like the terrain; on the terrain when on the ground; never below
+//! it), and writes one 64-byte row per aircraft slot: its offset from the eye (computed in
+//! f64), its attitude and its trail ring. Trail points live on the GPU as offsets from a
+//! per-aircraft anchor (re-anchored every few hundred kilometres), uploaded once when the
+//! fleet writes them, so a tick costs O(new points), not O(trail length x aircraft).
+//!
+//! Draw calls: one for all trails, one per model kind drawn, one for all symbols.
+//!
+//! Picking: symbols and models write `pick_base + slot` into the id buffer;
+//! [`TrafficLayer::aircraft_for_pick`] maps a [`crate::Pick::object`] back to the aircraft.
+
+mod gpu;
+pub mod models;
+
+use std::time::Instant;
+
+use globus_geo::{Cartographic, DVec3, Ellipsoid};
+use globus_traffic::fleet::flags;
+use globus_traffic::{Fleet, FleetError, Sampled};
+
+use crate::overlay::{FrameContext, Overlay, OverlayPass};
+pub use globus_traffic::fleet::{callsign_bytes, flags as aircraft_flags};
+pub use globus_traffic::{
+    AircraftKind, Batch, FleetError as BatchError, FleetOptions, Record, Replay, ReplayOptions,
+    Sample, Step, read_record,
+};
+pub use gpu::SHADER;
+use gpu::{AircraftGpu, Gpu, PAGE_POINTS, Uniforms, bits};
+pub use models::{ModelMesh, aircraft_mesh};
+
+/// Pick ids of a layer made with [`TrafficLayer::new`] start here (clear of a
+/// [`crate::VectorLayer`]'s, which start at 1).
+pub const DEFAULT_PICK_BASE: u32 = 1 << 30;
+
+/// Trail points more than this from their aircraft's anchor move the anchor (f32 offsets
+/// keep about 3 cm at this distance).
+const REANCHOR_M: f64 = 300_000.0;
+/// Below this altitude an aircraft may meet the ground (nothing on Earth is higher).
+const GROUND_CHECK_BELOW_M: f64 = 9_000.0;
+/// Ground heights looked up per frame at most (the rest use their last answer).
+const GROUND_QUERIES_PER_FRAME: u32 = 512;
+/// How far an aircraft moves before its ground height is looked up again, degrees.
+const GROUND_REFRESH_DEG: f64 = 0.002;
+/// How much nearer than its depth the terrain may be at a symbol's centre before the symbol
+/// is hidden (fraction of the depth).
+const SYMBOL_TOLERANCE: f32 = 1.0e-4;
+/// Light on faces turned away from the sun.
+const AMBIENT: f32 = 0.35;
+
+/// How the layer draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrafficStyle {
+    /// Symbol size per kind (light, narrow-body, wide-body, helicopter), pixels: also the
+    /// least size a model is drawn at.
+    pub symbol_px: [f32; 4],
+    /// Trail width, pixels (twice that for the selected aircraft).
+    pub trail_width_px: f32,
+    /// Draw trails.
+    pub trails: bool,
+    /// Draw models close in (symbols only otherwise).
+    pub models: bool,
+}
+
+impl Default for TrafficStyle {
+    fn default() -> Self {
+        Self {
+            symbol_px: [14.0, 18.0, 22.0, 18.0],
+            trail_width_px: 2.0,
+            trails: true,
+            models: true,
+        }
+    }
+}
+
+/// What the layer holds and what its last frame cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrafficStats {
+    /// Aircraft in the fleet.
+    pub aircraft: usize,
+    /// Aircraft drawn as models in the last frame.
+    pub models: u32,
+    /// Draw calls of the last frame.
+    pub draw_calls: u32,
+    /// GPU bytes of the layer's buffers.
+    pub gpu_bytes: u64,
+    /// Trail points placed (converted to offsets from their anchor) in the last frame.
+    pub trail_points_encoded: u32,
+    /// Trail points uploaded in the last frame.
+    pub trail_points_uploaded: u32,
+    /// Ground heights looked up in the last frame.
+    pub ground_queries: u32,
+    /// CPU seconds of the last frame's prepare (sampling, placing, uploads).
+    pub prepare_s: f64,
+    /// CPU seconds the last batch took to apply.
+    pub apply_s: f64,
+}
+
+/// Per-slot state kept between frames.
+#[derive(Clone, Copy, Debug)]
+struct SlotState {
+    /// Trail anchor (ECEF, as drawn).
+    anchor: Option<DVec3>,
+    /// Ground height last looked up (true metres), where, and in which frame.
+    ground_m: f64,
+    ground_at: [f64; 2],
+    ground_frame: u64,
+}
+
+impl Default for SlotState {
+    fn default() -> Self {
+        Self {
+            anchor: None,
+            ground_m: f64::NAN,
+            ground_at: [f64::NAN; 2],
+            ground_frame: 0,
+        }
+    }
+}
+
+/// Moving aircraft over the globe. See the module documentation.
+pub struct TrafficLayer {
+    fleet: Fleet,
+    sampled: Sampled,
+    batch: Batch,
+    time_s: f64,
+    epoch_s: Option<f64>,
+    style: TrafficStyle,
+    meshes: [ModelMesh; 4],
+    extents_m: [f32; 4],
+    pick_base: u32,
+    slots: Vec<SlotState>,
+    rows: Vec<AircraftGpu>,
+    /// Per slot: where the aircraft was drawn last frame (ECEF), NaN when not live.
+    drawn_at: Vec<DVec3>,
+    /// The GPU trail buffer's contents (offset from the slot's anchor, time since epoch).
+    trail_encoded: Vec<[f32; 4]>,
+    dirty_pages: Vec<bool>,
+    reencode_all: bool,
+    upload_all: bool,
+    built_for: Option<(Ellipsoid, f64)>,
+    writes: Vec<u32>,
+    instances: [Vec<u32>; 4],
+    gpu: Option<Gpu>,
+    stats: TrafficStats,
+    frame: u64,
+    selected: Option<u64>,
+}
+
+impl Default for TrafficLayer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl TrafficLayer {
+    /// An empty layer with the default fleet options and style, pick ids from
+    /// [`DEFAULT_PICK_BASE`].
+    pub fn new() -> Self {
+        Self::with_options(
+            FleetOptions::default(),
+            TrafficStyle::default(),
+            DEFAULT_PICK_BASE,
+        )
+    }
+
+    /// An empty layer: how its fleet interpolates and keeps trails, how it draws, and the
+    /// first pick id it writes (one per aircraft slot from there).
+    pub fn with_options(fleet: FleetOptions, style: TrafficStyle, pick_base: u32) -> Self {
+        let meshes = globus_traffic::AircraftKind::ALL.map(aircraft_mesh);
+        let extents_m = [0, 1, 2, 3].map(|k| meshes[k].extent_m());
+        Self {
+            fleet: Fleet::new(fleet),
+            sampled: Sampled::default(),
+            batch: Batch::default(),
+            time_s: 0.0,
+            epoch_s: None,
+            style,
+            meshes,
+            extents_m,
+            pick_base: pick_base.max(1),
+            slots: Vec::new(),
+            rows: Vec::new(),
+            drawn_at: Vec::new(),
+            trail_encoded: Vec::new(),
+            dirty_pages: Vec::new(),
+            reencode_all: true,
+            upload_all: true,
+            built_for: None,
+            writes: Vec::new(),
+            instances: Default::default(),
+            gpu: None,
+            stats: TrafficStats::default(),
+            frame: 0,
+            selected: None,
+        }
+    }
+
+    /// Replaces a kind's model (e.g. one read from a glTF file); the mesh's extent sets where
+    /// the symbol gives way to it.
+    pub fn set_model(&mut self, kind: globus_traffic::AircraftKind, mesh: ModelMesh) {
+        let k = usize::from(kind.index());
+        self.extents_m[k] = mesh.extent_m().max(0.1);
+        self.meshes[k] = mesh;
+        // The GPU copy is made again with the new meshes.
+        self.gpu = None;
+        self.upload_all = true;
+    }
+
+    /// The style.
+    pub fn style(&self) -> &TrafficStyle {
+        &self.style
+    }
+
+    /// Changes the style.
+    pub fn set_style(&mut self, style: TrafficStyle) {
+        self.style = style;
+    }
+
+    /// The fleet (every aircraft's samples and trails).
+    pub fn fleet(&self) -> &Fleet {
+        &self.fleet
+    }
+
+    /// Applies one tick's batch (see [`Fleet::apply`]).
+    pub fn apply(&mut self, batch: &Batch) -> Result<(), FleetError> {
+        let started = Instant::now();
+        let result = self.fleet.apply(batch);
+        self.stats.apply_s = started.elapsed().as_secs_f64();
+        result
+    }
+
+    /// Moves `replay` to `time_s` and applies what it hands over (emptying the fleet first
+    /// when the replay seeks), then draws that moment.
+    pub fn play(&mut self, replay: &mut Replay, time_s: f64) -> Result<Step, FleetError> {
+        let started = Instant::now();
+        let mut batch = std::mem::take(&mut self.batch);
+        let step = replay.advance_to(time_s, &mut batch);
+        if step == Step::Reset {
+            self.fleet.clear();
+        }
+        let result = self.fleet.apply(&batch);
+        self.batch = batch;
+        self.set_time(time_s);
+        self.stats.apply_s = started.elapsed().as_secs_f64();
+        result.map(|()| step)
+    }
+
+    /// The moment drawn (the fleet's clock, seconds).
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Draws the aircraft as they are at `time_s`.
+    pub fn set_time(&mut self, time_s: f64) {
+        if time_s.is_finite() {
+            self.time_s = time_s;
+        }
+    }
+
+    /// Selects an aircraft (highlighted, its trail emphasised), or none; false when the id
+    /// is not in the fleet.
+    pub fn select(&mut self, id: Option<u64>) -> bool {
+        if let Some(previous) = self.selected.take() {
+            self.fleet.set_selected(previous, false);
+        }
+        match id {
+            Some(id) if self.fleet.set_selected(id, true) => {
+                self.selected = Some(id);
+                true
+            }
+            Some(_) => false,
+            None => true,
+        }
+    }
+
+    /// The selected aircraft, if it is still in the fleet.
+    pub fn selected(&self) -> Option<u64> {
+        self.selected.filter(|&id| self.fleet.contains(id))
+    }
+
+    /// The aircraft whose symbol or model wrote `object` (a [`crate::Pick::object`]) in
+    /// the last frame, if it is this layer's and still in the fleet.
+    pub fn aircraft_for_pick(&self, object: u32) -> Option<u64> {
+        let slot = object.checked_sub(self.pick_base)?;
+        self.fleet.id_in_slot(slot)
+    }
+
+    /// Where an aircraft was drawn in the last frame (ECEF, exaggerated as drawn): the point
+    /// a camera following it looks at.
+    pub fn drawn_position(&self, id: u64) -> Option<DVec3> {
+        let slot = self.fleet.slot_of(id)? as usize;
+        self.drawn_at.get(slot).copied().filter(|p| p.is_finite())
+    }
+
+    /// What the layer holds and what its last frame cost.
+    pub fn stats(&self) -> TrafficStats {
+        TrafficStats {
+            aircraft: self.fleet.len(),
+            ..self.stats
+        }
+    }
+
+    /// The ground (true metres) under a slot's aircraft, looked up again when it moved or
+    /// the answer is old, within the frame's allowance.
+    fn ground_m(
+        &mut self,
+        frame: &FrameContext<'_>,
+        slot: usize,
+        lon_deg: f64,
+        lat_deg: f64,
+    ) -> f64 {
+        let s = &mut self.slots[slot];
+        let moved = (s.ground_at[0] - lon_deg)
+            .abs()
+            .max((s.ground_at[1] - lat_deg).abs());
+        let stale = moved.is_nan() || moved > GROUND_REFRESH_DEG || self.frame - s.ground_frame > 60;
+        if stale && (s.ground_m.is_nan() || self.stats.ground_queries < GROUND_QUERIES_PER_FRAME) {
+            s.ground_m = frame.ground_height_m(lon_deg.to_radians(), lat_deg.to_radians());
+            s.ground_at = [lon_deg, lat_deg];
+            s.ground_frame = self.frame;
+            self.stats.ground_queries += 1;
+        }
+        s.ground_m
+    }
+
+    /// Where a trail point is drawn (never below the ground under it).
+    fn trail_world(frame: &FrameContext<'_>, p: [f64; 3]) -> DVec3 {
+        let mut alt = p[2];
+        if alt < GROUND_CHECK_BELOW_M {
+            alt = alt.max(frame.ground_height_m(p[0].to_radians(), p[1].to_radians()));
+        }
+        frame.world_position(Cartographic::from_degrees(p[0], p[1], alt))
+    }
+
+    fn encode_point(&mut self, frame: &FrameContext<'_>, index: usize, epoch: f64) {
+        let n = self.fleet.options().trail_points;
+        let slot = index / n;
+        let p = self.fleet.trail_storage()[index];
+        let world = Self::trail_world(frame, p.position);
+        let anchor = match self.slots[slot].anchor {
+            Some(a) if (world - a).length() <= REANCHOR_M => a,
+            _ => {
+                // A new anchor: every point of the ring is re-encoded from it.
+                self.slots[slot].anchor = Some(world);
+                for k in slot * n..(slot + 1) * n {
+                    if k != index {
+                        let q = self.fleet.trail_storage()[k];
+                        let w = Self::trail_world(frame, q.position);
+                        self.trail_encoded[k] = encode(w - world, q.time_s - epoch);
+                    }
+                }
+                self.dirty_pages[slot * n / PAGE_POINTS..=((slot + 1) * n - 1) / PAGE_POINTS]
+                    .fill(true);
+                world
+            }
+        };
+        self.trail_encoded[index] = encode(world - anchor, p.time_s - epoch);
+        self.dirty_pages[index / PAGE_POINTS] = true;
+    }
+
+    /// Brings the CPU mirror of the trail buffer up to date with the fleet.
+    fn encode_trails(&mut self, frame: &FrameContext<'_>, epoch: f64) -> u32 {
+        let n = self.fleet.options().trail_points;
+        let points = self.fleet.slot_capacity() * n;
+        if self.trail_encoded.len() < points {
+            self.trail_encoded.resize(points, [0.0; 4]);
+            self.upload_all = true;
+        }
+        self.dirty_pages.resize(points.div_ceil(PAGE_POINTS), false);
+        let mut writes = std::mem::take(&mut self.writes);
+        writes.clear();
+        let everything = self.fleet.take_trail_writes(&mut writes) || self.reencode_all;
+        let mut encoded = 0u32;
+        if everything {
+            writes.clear();
+            for s in &mut self.slots {
+                s.anchor = None;
+            }
+            for slot in 0..self.fleet.slot_capacity() {
+                if self.fleet.id_in_slot(slot as u32).is_none() {
+                    continue;
+                }
+                let (_, len) = self.fleet.trail_ring(slot as u32);
+                if len > 0 {
+                    // Re-anchors at this point and encodes the whole ring.
+                    let (head, _) = self.fleet.trail_ring(slot as u32);
+                    let newest = slot * n + (head as usize + n - 1) % n;
+                    self.encode_point(frame, newest, epoch);
+                    encoded += n as u32;
+                }
+            }
+            self.upload_all = true;
+            self.reencode_all = false;
+        } else {
+            for &i in &writes {
+                self.encode_point(frame, i as usize, epoch);
+                encoded += 1;
+            }
+        }
+        self.writes = writes;
+        encoded
+    }
+
+    /// One row per slot for this frame, and the model instances.
+    fn place_aircraft(&mut self, frame: &FrameContext<'_>) {
+        let camera = frame.camera();
+        let view = camera.view();
+        let eye = camera.origin();
+        let forward = view.forward();
+        let (_, h) = camera.viewport_px();
+        let focal_px = f64::from(h) / (2.0 * (view.fov_y_rad * 0.5).tan());
+        let ellipsoid = *frame.ellipsoid();
+        let capacity = self.fleet.slot_capacity();
+        self.rows.clear();
+        self.rows.resize(capacity, AircraftGpu::default());
+        self.drawn_at.clear();
+        self.drawn_at.resize(capacity, DVec3::NAN);
+        for list in &mut self.instances {
+            list.clear();
+        }
+        let sampled = std::mem::take(&mut self.sampled);
+        for r in 0..sampled.len() {
+            let slot = sampled.slots[r] as usize;
+            let [lon, lat, alt] = sampled.positions[r];
+            let on_ground = sampled.flags[r] & flags::ON_GROUND != 0;
+            let mut alt_m = alt;
+            if on_ground || alt < GROUND_CHECK_BELOW_M {
+                let ground = self.ground_m(frame, slot, lon, lat);
+                alt_m = if on_ground { ground } else { alt.max(ground) };
+            }
+            let world = frame.world_position(Cartographic::from_degrees(lon, lat, alt_m));
+            let enu = ellipsoid.enu_frame(lon.to_radians(), lat.to_radians());
+            let [heading, pitch, _roll] =
+                sampled.attitudes_deg[r].map(|a| f64::from(a).to_radians());
+            let horizontal = enu.north * heading.cos() + enu.east * heading.sin();
+            let nose = horizontal * pitch.cos() + enu.up * pitch.sin();
+            let up = enu.up * pitch.cos() - horizontal * pitch.sin();
+            let kind = usize::from(sampled.kinds[r] & 3);
+            let f = sampled.flags[r];
+            let mut b = bits::LIVE | ((kind as u32) << bits::KIND_SHIFT);
+            if f & flags::SELECTED != 0 {
+                b |= bits::SELECTED;
+            }
+            if f & flags::STALE != 0 {
+                b |= bits::STALE;
+            }
+            let (head, len) = self.fleet.trail_ring(slot as u32);
+            let position = camera.relative(world);
+            let anchor = self.slots[slot]
+                .anchor
+                .map_or(position, |a| camera.relative(a));
+            self.rows[slot] = AircraftGpu {
+                position: position.to_array(),
+                colour: u32::from_le_bytes(sampled.colours[r]),
+                forward: nose.as_vec3().to_array(),
+                bits: b,
+                up: up.as_vec3().to_array(),
+                ring: (head & 0xffff) | (len.min(0xffff) << 16),
+                anchor: anchor.to_array(),
+                spare: 0,
+            };
+            self.drawn_at[slot] = world;
+            if self.style.models {
+                let offset = world - eye;
+                let distance = offset.length().max(1e-3);
+                let true_px = f64::from(self.extents_m[kind]) * focal_px / distance;
+                let in_front = offset.dot(forward) > -f64::from(self.extents_m[kind]) * 2.0;
+                if in_front && true_px >= 0.75 * f64::from(self.style.symbol_px[kind]) {
+                    self.instances[kind].push(slot as u32);
+                }
+            }
+        }
+        self.sampled = sampled;
+    }
+}
+
+fn encode(offset: DVec3, time_s: f64) -> [f32; 4] {
+    [
+        offset.x as f32,
+        offset.y as f32,
+        offset.z as f32,
+        time_s as f32,
+    ]
+}
+
+impl Overlay for TrafficLayer {
+    fn passes(&self) -> &[OverlayPass] {
+        &[OverlayPass::World, OverlayPass::ScreenAligned]
+    }
+
+    fn wants_terrain_depth(&self) -> bool {
+        true
+    }
+
+    fn prepare(&mut self, frame: &FrameContext<'_>) {
+        let started = Instant::now();
+        self.frame += 1;
+        self.stats.ground_queries = 0;
+        let key = (*frame.ellipsoid(), frame.exaggeration());
+        if self.built_for != Some(key) {
+            self.built_for = Some(key);
+            self.reencode_all = true;
+        }
+        let epoch = match self.epoch_s {
+            Some(e) if (self.time_s - e).abs() < 1.0e5 => e,
+            _ => {
+                self.epoch_s = Some(self.time_s);
+                self.reencode_all = true;
+                self.time_s
+            }
+        };
+        self.fleet.sample(self.time_s, &mut self.sampled);
+        let capacity = self.fleet.slot_capacity();
+        self.slots.resize(capacity, SlotState::default());
+        self.stats.trail_points_encoded = self.encode_trails(frame, epoch);
+        self.place_aircraft(frame);
+
+        if self.gpu.is_none() {
+            self.gpu = Some(Gpu::new(frame, &self.meshes));
+            self.upload_all = true;
+        }
+        let Some(gpu) = self.gpu.as_mut() else {
+            return;
+        };
+        let n = self.fleet.options().trail_points;
+        if gpu.reserve_trails(frame, capacity * n) {
+            self.upload_all = true;
+        }
+        let mut uploaded = 0usize;
+        if self.upload_all {
+            gpu.upload_trails(frame, &self.trail_encoded, 0..self.trail_encoded.len());
+            uploaded = self.trail_encoded.len();
+            self.dirty_pages.fill(false);
+            self.upload_all = false;
+        } else {
+            let mut page = 0;
+            while page < self.dirty_pages.len() {
+                if !self.dirty_pages[page] {
+                    page += 1;
+                    continue;
+                }
+                let start = page;
+                while page < self.dirty_pages.len() && self.dirty_pages[page] {
+                    self.dirty_pages[page] = false;
+                    page += 1;
+                }
+                let range = start * PAGE_POINTS..page * PAGE_POINTS;
+                uploaded += range.len();
+                gpu.upload_trails(frame, &self.trail_encoded, range);
+            }
+        }
+        let camera = frame.camera();
+        let (w, h) = camera.viewport_px();
+        let (w, h) = (w.max(1) as f32, h.max(1) as f32);
+        let focal_px = h / (2.0 * (camera.view().fov_y_rad as f32 * 0.5).tan());
+        let sun = frame.sun_direction().as_vec3();
+        let mut kinds = [[0f32; 4]; 4];
+        for (k, row) in kinds.iter_mut().enumerate() {
+            *row = [self.style.symbol_px[k], self.extents_m[k], 0.0, 0.0];
+        }
+        let uniforms = Uniforms {
+            clip_from_eye: camera.clip_from_eye().to_cols_array_2d(),
+            viewport: [w, h, 1.0 / w, 1.0 / h],
+            params: [
+                focal_px,
+                (self.time_s - epoch) as f32,
+                self.fleet.options().trail_s as f32,
+                SYMBOL_TOLERANCE,
+            ],
+            sun: [sun.x, sun.y, sun.z, AMBIENT],
+            counts: [
+                n as u32,
+                self.pick_base,
+                self.style.trail_width_px.to_bits(),
+                0,
+            ],
+            kinds,
+        };
+        let trails = if self.style.trails { n as u32 } else { 0 };
+        gpu.write_frame(frame, &uniforms, &self.rows, &self.instances, trails);
+        let model_draws = self.instances.iter().filter(|l| !l.is_empty()).count() as u32;
+        let any = u32::from(!self.rows.is_empty());
+        self.stats.draw_calls = any * (1 + u32::from(self.style.trails)) + model_draws;
+        self.stats.models = self.instances.iter().map(|l| l.len() as u32).sum();
+        self.stats.gpu_bytes = gpu.gpu_bytes();
+        self.stats.trail_points_uploaded = uploaded as u32;
+        self.stats.prepare_s = started.elapsed().as_secs_f64();
+    }
+
+    fn draw(
+        &self,
+        pass: OverlayPass,
+        _frame: &FrameContext<'_>,
+        render_pass: &mut wgpu::RenderPass<'_>,
+    ) {
+        let Some(gpu) = &self.gpu else {
+            return;
+        };
+        match pass {
+            OverlayPass::World => {
+                gpu.draw_world(render_pass, self.style.trails);
+            }
+            OverlayPass::ScreenAligned => {
+                gpu.draw_symbols(render_pass);
+            }
+            OverlayPass::Screen => {}
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! The aircraft shapes Globus ships, made by code at start-up: a light aircraft (high wing,
+//! straight), a narrow-body and a wide-body airliner (swept wings, twin engines), and a
+//! helicopter (rotor disc, tail boom), at their real sizes (Cessna 172, Airbus A320,
+//! Boeing 777-300ER, Airbus H135).
+//!
+//! A mesh is a list of triangles with flat normals (a faceted look reads well at a few dozen
+//! pixels), in model metres: `x` forward (the nose), `y` left, `z` up, the origin at the
+//! aircraft's reference point (centre of the fuselage, about the wing). Shapes are lofts
+//! (fuselage, nacelles, boom: rings of points joined by quads) and slabs (wings, tails: a
+//! trapezoid with a thickness), so each is a few hundred triangles: thousands of aircraft
+//! drawn as models stay within a frame.
+
+use globus_traffic::AircraftKind;
+
+/// One aircraft shape: triangles with flat normals.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelMesh {
+    /// The accent given to triangles being added.
+    accent: u8,
+    /// Three per triangle, metres (`x` forward, `y` left, `z` up).
+    pub positions: Vec<[f32; 3]>,
+    /// One per position (the triangle's), unit length.
+    pub normals: Vec<[f32; 3]>,
+    /// One per position: 0 for the airframe (drawn white), 1 for accents (tail fin,
+    /// nacelles, rotor) drawn in the aircraft's colour, so the model matches its symbol and
+    /// trail.
+    pub accents: Vec<u8>,
+}
+
+impl ModelMesh {
+    /// Triangles.
+    pub fn triangles(&self) -> usize {
+        self.positions.len() / 3
+    }
+
+    /// The largest extent (length or span), metres: what the minimum on-screen size applies
+    /// to.
+    pub fn extent_m(&self) -> f32 {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for p in &self.positions {
+            for i in 0..3 {
+                lo[i] = lo[i].min(p[i]);
+                hi[i] = hi[i].max(p[i]);
+            }
+        }
+        (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f32::max)
+    }
+
+    /// Paints what is added next as an accent (or not).
+    fn accent(&mut self, on: bool) -> &mut Self {
+        self.accent = u8::from(on);
+        self
+    }
+
+    fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
+        let u = sub(b, a);
+        let v = sub(c, a);
+        let n = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if len <= 1e-9 {
+            return;
+        }
+        let n = [n[0] / len, n[1] / len, n[2] / len];
+        self.positions.extend([a, b, c]);
+        self.normals.extend([n; 3]);
+        self.accents.extend([self.accent; 3]);
+    }
+
+    fn quad(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3], d: [f32; 3]) {
+        self.triangle(a, b, c);
+        self.triangle(a, c, d);
+    }
+
+    /// A loft along `x`: each station is (x, centre z, half width, half height), joined by
+    /// rings of `sides` points; ends closed.
+    fn loft(&mut self, stations: &[[f32; 4]], sides: usize, y_offset: f32) {
+        let ring = |s: &[f32; 4]| -> Vec<[f32; 3]> {
+            (0..sides)
+                .map(|k| {
+                    let a = k as f32 / sides as f32 * std::f32::consts::TAU;
+                    [s[0], y_offset + s[2] * a.cos(), s[1] + s[3] * a.sin()]
+                })
+                .collect()
+        };
+        let rings: Vec<Vec<[f32; 3]>> = stations.iter().map(ring).collect();
+        for w in rings.windows(2) {
+            for k in 0..sides {
+                let k1 = (k + 1) % sides;
+                self.quad(w[0][k], w[0][k1], w[1][k1], w[1][k]);
+            }
+        }
+        for (r, s) in [
+            (&rings[0], &stations[0]),
+            (&rings[rings.len() - 1], &stations[stations.len() - 1]),
+        ] {
+            let centre = [s[0], y_offset, s[1]];
+            for k in 0..sides {
+                self.triangle(centre, r[(k + 1) % sides], r[k]);
+            }
+        }
+    }
+
+    /// A slab: the quadrilateral `root_front, root_back, tip_back, tip_front` given as its
+    /// mid-surface, thickened by `half_thick` along `thick_axis` (2: z for wings, 1: y for
+    /// fins).
+    fn slab(&mut self, outline: [[f32; 3]; 4], half_thick: f32, thick_axis: usize) {
+        let off = |p: [f32; 3], s: f32| {
+            let mut q = p;
+            q[thick_axis] += s * half_thick;
+            q
+        };
+        let top: Vec<[f32; 3]> = outline.iter().map(|&p| off(p, 1.0)).collect();
+        let bottom: Vec<[f32; 3]> = outline.iter().map(|&p| off(p, -1.0)).collect();
+        self.quad(top[0], top[1], top[2], top[3]);
+        self.quad(bottom[3], bottom[2], bottom[1], bottom[0]);
+        for k in 0..4 {
+            let k1 = (k + 1) % 4;
+            self.quad(bottom[k], bottom[k1], top[k1], top[k]);
+        }
+    }
+
+    /// A wing pair (or tailplane) mirrored about `y = 0`: root chord from `x_root` back by
+    /// `root_chord`, tip at `half_span`, swept back by `sweep` metres at the tip's leading
+    /// edge, at height `z` rising by `dihedral` metres at the tip.
+    #[allow(clippy::too_many_arguments)]
+    fn wings(
+        &mut self,
+        x_root: f32,
+        root_chord: f32,
+        tip_chord: f32,
+        half_span: f32,
+        sweep: f32,
+        z: f32,
+        dihedral: f32,
+        half_thick: f32,
+    ) {
+        for side in [1.0f32, -1.0] {
+            let tip_front = [x_root - sweep, side * half_span, z + dihedral];
+            self.slab(
+                [
+                    [x_root, side * 0.3, z],
+                    [x_root - root_chord, side * 0.3, z],
+                    [tip_front[0] - tip_chord, tip_front[1], tip_front[2]],
+                    tip_front,
+                ],
+                half_thick,
+                2,
+            );
+        }
+    }
+
+    /// A vertical fin on the centre line: root from `x_root` back by `root_chord` at height
+    /// `z`, tip `height` above, swept by `sweep`.
+    fn fin(
+        &mut self,
+        x_root: f32,
+        root_chord: f32,
+        tip_chord: f32,
+        z: f32,
+        height: f32,
+        sweep: f32,
+    ) {
+        let tip_front = [x_root - sweep, 0.0, z + height];
+        self.slab(
+            [
+                [x_root, 0.0, z],
+                [x_root - root_chord, 0.0, z],
+                [tip_front[0] - tip_chord, 0.0, tip_front[2]],
+                tip_front,
+            ],
+            (root_chord * 0.04).max(0.05),
+            1,
+        );
+    }
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// A fuselage of length `length` and radius `r`: rounded nose, straight barrel, tail cone
+/// rising to the fin.
+fn fuselage(m: &mut ModelMesh, length: f32, r: f32, sides: usize) {
+    let nose = length * 0.5;
+    let tail = -length * 0.5;
+    let stations = [
+        [nose, -0.1 * r, 0.05 * r, 0.05 * r],
+        [nose - 0.4 * r, -0.05 * r, 0.55 * r, 0.5 * r],
+        [nose - 1.2 * r, 0.0, 0.9 * r, 0.88 * r],
+        [nose - 2.5 * r, 0.0, r, r],
+        [tail + length * 0.3, 0.0, r, r],
+        [tail + length * 0.12, 0.35 * r, 0.6 * r, 0.55 * r],
+        [tail, 0.7 * r, 0.12 * r, 0.2 * r],
+    ];
+    m.loft(&stations, sides, 0.0);
+}
+
+fn nacelle(m: &mut ModelMesh, x: f32, y: f32, z: f32, length: f32, r: f32) {
+    let stations = [
+        [x, z, 0.9 * r, 0.9 * r],
+        [x - 0.2 * length, z, r, r],
+        [x - length, z, 0.7 * r, 0.7 * r],
+    ];
+    m.loft(&stations, 8, y);
+}
+
+/// The shape of a kind.
+pub fn aircraft_mesh(kind: AircraftKind) -> ModelMesh {
+    let mut m = ModelMesh::default();
+    match kind {
+        AircraftKind::NarrowBody => {
+            // Airbus A320: 37.6 m long, 35.8 m span, fuselage 3.95 m.
+            fuselage(&mut m, 37.6, 1.98, 12);
+            m.wings(3.5, 6.0, 1.5, 17.9, 7.5, -1.0, 1.2, 0.25);
+            m.wings(-14.0, 3.6, 1.4, 6.2, 3.5, 0.6, 0.3, 0.12);
+            m.accent(true).fin(-12.5, 5.5, 2.0, 1.2, 6.0, 4.5);
+            for side in [1.0, -1.0] {
+                nacelle(&mut m, 5.0, side * 5.8, -2.2, 4.5, 1.0);
+            }
+        }
+        AircraftKind::WideBody => {
+            // Boeing 777-300ER: 73.9 m long, 64.8 m span, fuselage 6.2 m.
+            fuselage(&mut m, 73.9, 3.1, 14);
+            m.wings(8.0, 12.0, 3.0, 32.4, 14.0, -1.8, 2.0, 0.45);
+            m.wings(-29.0, 7.0, 2.5, 10.6, 6.5, 1.0, 0.5, 0.2);
+            m.accent(true).fin(-26.0, 10.0, 3.5, 2.0, 10.5, 8.5);
+            for side in [1.0, -1.0] {
+                nacelle(&mut m, 11.5, side * 9.7, -3.4, 7.5, 1.7);
+            }
+        }
+        AircraftKind::Light => {
+            // Cessna 172: 8.3 m long, 11.0 m span, high straight wing.
+            fuselage(&mut m, 8.3, 0.6, 10);
+            m.wings(1.3, 1.6, 1.1, 5.5, 0.2, 0.75, 0.15, 0.08);
+            m.wings(-3.1, 1.0, 0.7, 1.7, 0.3, 0.1, 0.0, 0.05);
+            m.accent(true).fin(-2.8, 1.3, 0.6, 0.3, 1.3, 0.9);
+        }
+        AircraftKind::Helicopter => {
+            // Airbus H135: 10.2 m rotor, 12.2 m long overall.
+            let body = [
+                [2.6, -0.3, 0.1, 0.1],
+                [2.2, -0.1, 0.7, 0.75],
+                [0.8, 0.1, 0.8, 0.95],
+                [-1.2, 0.3, 0.75, 0.85],
+                [-2.0, 0.5, 0.35, 0.4],
+            ];
+            m.accent(true).loft(&body, 12, 0.0);
+            m.accent(false);
+            let boom = [
+                [-1.9, 0.5, 0.25, 0.25],
+                [-6.5, 0.6, 0.12, 0.15],
+                [-7.1, 0.6, 0.05, 0.05],
+            ];
+            m.loft(&boom, 8, 0.0);
+            m.fin(-6.2, 0.9, 0.5, 0.4, 1.4, 0.6);
+            m.wings(-5.6, 0.6, 0.4, 1.0, 0.1, 0.6, 0.0, 0.04);
+            // Rotor disc (blades blurred by their speed) on its mast.
+            m.fin(0.45, 0.3, 0.3, 0.9, 0.6, 0.0);
+            m.rotor(0.3, 1.5, 5.1);
+        }
+    }
+    m
+}
+
+impl ModelMesh {
+    /// A thin disc of radius `r` in the `x`-`y` plane, centred at (`centre_x`, 0, `z`).
+    fn rotor(&mut self, centre_x: f32, z: f32, r: f32) {
+        let sides = 20;
+        let h = 0.05;
+        for k in 0..sides {
+            let a0 = k as f32 / sides as f32 * std::f32::consts::TAU;
+            let a1 = (k + 1) as f32 / sides as f32 * std::f32::consts::TAU;
+            let p = |a: f32, dz: f32| [centre_x + r * a.cos(), r * a.sin(), z + dz];
+            let c = |dz: f32| [centre_x, 0.0, z + dz];
+            self.triangle(c(h), p(a0, h), p(a1, h));
+            self.triangle(c(-h), p(a1, -h), p(a0, -h));
+            self.quad(p(a0, -h), p(a1, -h), p(a1, h), p(a0, h));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bounds(m: &ModelMesh) -> ([f32; 3], [f32; 3]) {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for p in &m.positions {
+            for i in 0..3 {
+                lo[i] = lo[i].min(p[i]);
+                hi[i] = hi[i].max(p[i]);
+            }
+        }
+        (lo, hi)
+    }
+
+    #[test]
+    fn shapes_have_their_aircrafts_sizes_and_are_symmetric() {
+        // (kind, length, span) of the type each stands for, metres.
+        for (kind, length, span) in [
+            (AircraftKind::NarrowBody, 37.6, 35.8),
+            (AircraftKind::WideBody, 73.9, 64.8),
+            (AircraftKind::Light, 8.3, 11.0),
+            (AircraftKind::Helicopter, 12.2, 10.2),
+        ] {
+            let m = aircraft_mesh(kind);
+            let (lo, hi) = bounds(&m);
+            let (l, s) = (hi[0] - lo[0], hi[1] - lo[1]);
+            assert!((l - length).abs() < length * 0.08, "{kind:?} length {l}");
+            assert!((s - span).abs() < span * 0.08, "{kind:?} span {s}");
+            assert!((lo[1] + hi[1]).abs() < 0.01, "{kind:?} not symmetric");
+            assert!(
+                m.triangles() > 100 && m.triangles() < 1500,
+                "{kind:?} {}",
+                m.triangles()
+            );
+            assert!((m.extent_m() - length.max(span)).abs() < length.max(span) * 0.08);
+            // Flat normals: unit length, perpendicular to their triangle.
+            for (t, n) in m.positions.chunks(3).zip(m.normals.chunks(3)) {
+                let n = n[0];
+                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                assert!((len - 1.0).abs() < 1e-4);
+                for e in [sub(t[1], t[0]), sub(t[2], t[0])] {
+                    let dot = e[0] * n[0] + e[1] * n[1] + e[2] * n[2];
+                    let el = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                    assert!(dot.abs() <= 1e-3 * el.max(1.0), "{kind:?}: {dot}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_nose_points_forward() {
+        for kind in AircraftKind::ALL {
+            let m = aircraft_mesh(kind);
+            // More of the fuselage's cross-section is behind the reference point than the
+            // nose's tip: the tip (largest x) lies on the centre line.
+            let tip = m
+                .positions
+                .iter()
+                .filter(|p| p[2] < 0.9)
+                .max_by(|a, b| a[0].total_cmp(&b[0]))
+                .copied()
+                .unwrap_or_default();
+            assert!(tip[1].abs() < 0.2, "{kind:?} nose tip at {tip:?}");
+        }
+    }
+}

@@ -1,0 +1,292 @@
+//! The traffic layer on lavapipe, pictures checked against the CPU's projection of where the
+//! samples put each aircraft: symbols at the interpolated moment within a pixel, from orbit
+//! and close in; picking returns the aircraft; aircraft behind the planet are not drawn;
+//! trails follow the flown path and fade with age; a close view draws the lit model.
+
+mod common;
+
+use std::time::Duration;
+
+use globus_engine::traffic::{AircraftKind, Batch, Sample, callsign_bytes};
+use globus_engine::{
+    Cartographic, DVec2, Globe, Headless, RgbaImage, TrafficLayer, View, save_png,
+};
+
+const TIMEOUT: Duration = Duration::from_secs(300);
+const MAGENTA: [u8; 4] = [255, 0, 255, 255];
+const CYAN: [u8; 4] = [0, 255, 255, 255];
+
+fn sample(id: u64, t: f64, lon: f64, lat: f64, alt: f64, heading: f32, colour: [u8; 4]) -> Sample {
+    Sample {
+        id,
+        time_s: t,
+        position: [lon, lat, alt],
+        attitude_deg: [heading, 0.0, 0.0],
+        kind: AircraftKind::NarrowBody.index(),
+        colour,
+        flags: 0,
+        speeds: [230.0, 0.0],
+        callsign: callsign_bytes("TEST1"),
+    }
+}
+
+fn render(off: &mut Headless, view: &View, layer: &mut TrafficLayer, name: &str) -> RgbaImage {
+    let frame = off
+        .render_complete(view, TIMEOUT, &mut [layer])
+        .expect("render");
+    let dir = globus_test_support::output_dir("traffic");
+    save_png(&frame.image, &dir.join(format!("{name}.png"))).expect("save");
+    frame.image
+}
+
+fn close(p: [u8; 4], c: [u8; 4]) -> bool {
+    (0..3).all(|k| (i32::from(p[k]) - i32::from(c[k])).abs() < 40)
+}
+
+/// Pixels of `colour` within `radius` of `around`.
+fn pixels_of(img: &RgbaImage, colour: [u8; 4], around: DVec2, radius: f64) -> Vec<DVec2> {
+    let mut out = Vec::new();
+    let (x0, x1) = (
+        (around.x - radius).max(0.0) as u32,
+        (around.x + radius).min(f64::from(img.width) - 1.0) as u32,
+    );
+    let (y0, y1) = (
+        (around.y - radius).max(0.0) as u32,
+        (around.y + radius).min(f64::from(img.height) - 1.0) as u32,
+    );
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            if close(img.get(x, y), colour) {
+                out.push(DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+            }
+        }
+    }
+    out
+}
+
+fn project(globe: &Globe, lon: f64, lat: f64, alt: f64) -> DVec2 {
+    let world = globe.world_position(Cartographic::from_degrees(lon, lat, alt));
+    globe
+        .camera()
+        .and_then(|c| c.project(world))
+        .expect("in front of the camera")
+}
+
+/// A north-bound symbol is symmetric about the line through its centre along the heading,
+/// and reaches as far ahead as behind: its centre from its pixels.
+fn symbol_centre(px: &[DVec2]) -> DVec2 {
+    let n = px.len() as f64;
+    let x = px.iter().map(|p| p.x).sum::<f64>() / n;
+    let (lo, hi) = px
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.y), hi.max(p.y))
+        });
+    DVec2::new(x, (lo + hi) * 0.5)
+}
+
+#[test]
+fn aircraft_are_drawn_where_their_samples_put_them_within_a_pixel_from_orbit_and_close_in() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    // Straight down from 2,000 km, from 60 km, and from 25 km above the aircraft's level.
+    for (alt, name) in [(2.0e6, "orbit"), (60_000.0, "high"), (35_000.0, "close")] {
+        // Two aircraft heading north at FL330, a fifth of the view's width either side of
+        // its centre, sampled 10 s apart; drawn 3.7 s after the first sample.
+        let dlon = 0.2 * (alt - 10_000.0) / 85_000.0;
+        let (lon_a, lon_b) = (-29.75 - dlon, -29.75 + dlon);
+        let dlat = dlon * 0.05;
+        let mut layer = TrafficLayer::new();
+        let mut batch = Batch::default();
+        batch.push(sample(1, 100.0, lon_a, 40.0, 10_000.0, 0.0, MAGENTA));
+        batch.push(sample(2, 100.0, lon_b, 40.0, 10_000.0, 0.0, CYAN));
+        batch.push(sample(1, 110.0, lon_a, 40.0 + dlat, 10_100.0, 0.0, MAGENTA));
+        batch.push(sample(2, 110.0, lon_b, 40.0 + dlat, 10_000.0, 0.0, CYAN));
+        layer.apply(&batch).expect("apply");
+        layer.set_time(103.7);
+        let lat = 40.0 + dlat * 0.37;
+        let alt_a = 10_000.0 + 100.0 * 0.37;
+        let spec = common::camera(-29.75, 40.0, alt, 0.0, -90.0, false);
+        let view = spec.view(off.globe(), 60.0, w, h);
+        let img = render(&mut off, &view, &mut layer, &format!("fidelity-{name}"));
+        for (colour, lon, alt_m) in [(MAGENTA, lon_a, alt_a), (CYAN, lon_b, 10_000.0)] {
+            let want = project(off.globe(), lon, lat, alt_m);
+            let px = pixels_of(&img, colour, want, 20.0);
+            assert!(
+                px.len() > 20,
+                "{name}: {} pixels of {colour:?} near {want:?}",
+                px.len()
+            );
+            let got = symbol_centre(&px);
+            assert!(
+                (got - want).length() < 1.0,
+                "{name}: {colour:?} drawn at {got:?}, samples say {want:?}"
+            );
+        }
+        // Picking at the projected centre finds each aircraft.
+        for (id, lon, alt_m) in [(1, lon_a, alt_a), (2, lon_b, 10_000.0)] {
+            let at = project(off.globe(), lon, lat, alt_m);
+            let pick = off.globe().pick(at.x, at.y).expect("pick").expect("inside");
+            let object = pick.object().expect("an object at the aircraft");
+            assert_eq!(layer.aircraft_for_pick(object), Some(id), "{name}");
+        }
+        assert_eq!(layer.stats().aircraft, 2);
+        assert!(layer.stats().draw_calls <= 3, "{:?}", layer.stats());
+    }
+}
+
+#[test]
+fn aircraft_behind_the_planet_are_not_drawn() {
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let mut layer = TrafficLayer::new();
+    let mut batch = Batch::default();
+    // One over the point below the camera, one on the far side (behind the globe's disc).
+    batch.push(sample(1, 0.0, 10.0, 0.0, 11_000.0, 90.0, MAGENTA));
+    batch.push(sample(2, 0.0, 10.0, 40.0, 11_000.0, 90.0, CYAN));
+    batch.push(sample(3, 0.0, -170.0, 0.0, 11_000.0, 90.0, CYAN));
+    layer.apply(&batch).expect("apply");
+    layer.set_time(0.0);
+    let view = common::camera(10.0, 0.0, 2.0e7, 0.0, -90.0, false).view(off.globe(), 40.0, w, h);
+    let img = render(&mut off, &view, &mut layer, "far-side");
+    let centre = DVec2::new(f64::from(w) / 2.0, f64::from(h) / 2.0);
+    assert!(pixels_of(&img, MAGENTA, centre, 15.0).len() > 10);
+    // The far one projects onto the disc too, near its centre, but the planet hides it: the
+    // only cyan is the one at 40 N.
+    let far = project(off.globe(), -170.0, 0.0, 11_000.0);
+    assert!((far - centre).length() < 5.0, "{far:?}");
+    assert!(
+        pixels_of(&img, CYAN, far, 12.0).is_empty(),
+        "the far side's aircraft shows"
+    );
+    let north = project(off.globe(), 10.0, 40.0, 11_000.0);
+    assert!(pixels_of(&img, CYAN, north, 12.0).len() > 10);
+}
+
+#[test]
+fn trails_follow_the_flown_path_and_fade_with_age() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let mut layer = TrafficLayer::new();
+    // Eastbound along 20 N for ten minutes, a report every 10 s.
+    for k in 0..=60 {
+        let t = f64::from(k) * 10.0;
+        let mut batch = Batch::default();
+        batch.push(sample(
+            7,
+            t,
+            -40.0 + t * 0.002,
+            20.0,
+            11_000.0,
+            90.0,
+            MAGENTA,
+        ));
+        layer.apply(&batch).expect("apply");
+    }
+    layer.set_time(600.0);
+    let view =
+        common::camera(-39.4, 20.0, 400_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let plain = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let img = render(&mut off, &view, &mut layer, "trail");
+    // How much each point of the path changed towards magenta, from old to new.
+    let mut strengths = Vec::new();
+    for k in [2, 10, 20, 30, 40, 50] {
+        let t = f64::from(k) * 10.0;
+        let at = project(off.globe(), -40.0 + t * 0.002, 20.0, 11_000.0);
+        let (x, y) = (at.x as u32, at.y as u32);
+        let best = (y.saturating_sub(1)..=y + 1)
+            .map(|yy| {
+                let (p, b) = (img.get(x, yy), plain.get(x, yy));
+                // Towards magenta: red and blue up, green down.
+                (i32::from(p[0]) - i32::from(b[0])) + (i32::from(p[2]) - i32::from(b[2]))
+                    - (i32::from(p[1]) - i32::from(b[1]))
+            })
+            .max()
+            .unwrap_or(0);
+        strengths.push(best);
+    }
+    assert!(
+        strengths.iter().all(|&s| s > 20),
+        "the trail is missing somewhere: {strengths:?}"
+    );
+    assert!(
+        strengths.windows(2).all(|w| w[1] >= w[0] - 8) && strengths[5] > strengths[0] + 40,
+        "the trail does not fade with age: {strengths:?}"
+    );
+    // Off the path, nothing changed.
+    let off_path = project(off.globe(), -39.7, 20.3, 11_000.0);
+    let (p, b) = (
+        img.get(off_path.x as u32, off_path.y as u32),
+        plain.get(off_path.x as u32, off_path.y as u32),
+    );
+    assert_eq!(p, b);
+}
+
+#[test]
+fn a_close_view_draws_the_lit_model_and_a_far_one_the_symbol() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let mut layer = TrafficLayer::new();
+    let mut batch = Batch::default();
+    batch.push(sample(5, 0.0, 8.0, 46.0, 9_500.0, 45.0, MAGENTA));
+    layer.apply(&batch).expect("apply");
+    layer.set_time(0.0);
+    // 120 m above and behind the aircraft, looking down at it.
+    let globe = off.globe();
+    let at = globe.world_position(Cartographic::from_degrees(8.0, 46.0, 9_500.0));
+    let enu = globe
+        .ellipsoid()
+        .enu_frame(8f64.to_radians(), 46f64.to_radians());
+    let behind = -(enu.north + enu.east).normalize();
+    let eye = at + behind * 90.0 + enu.up * 60.0;
+    let view = View::look_at(eye, at, enu.up, 50f64.to_radians(), w, h).expect("view");
+    let img = render(&mut off, &view, &mut layer, "model-close");
+    assert!(layer.stats().models == 1, "{:?}", layer.stats());
+    let centre = off
+        .globe()
+        .camera()
+        .and_then(|c| c.project(at))
+        .expect("in view");
+    // The model covers its centre (its id is there) with shaded grey, not the symbol's magenta.
+    let pick = off
+        .globe()
+        .pick(centre.x, centre.y)
+        .expect("pick")
+        .expect("inside");
+    assert_eq!(
+        pick.object().and_then(|o| layer.aircraft_for_pick(o)),
+        Some(5)
+    );
+    let p = img.get(centre.x as u32, centre.y as u32);
+    assert!(!close(p, MAGENTA), "the symbol shows close in: {p:?}");
+    // Lit: the model's pixels (where the picture differs from the plain ground) are shaded,
+    // faces turned to the sun brighter than those turned away, and it fills a good part of
+    // the view (90 m from a 37.6 m aircraft).
+    let plain = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let mut lum = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (p, b) = (img.get(x, y), plain.get(x, y));
+            if (0..3).any(|k| (i32::from(p[k]) - i32::from(b[k])).abs() > 24) {
+                lum.push(i32::from(p[0]) + i32::from(p[1]) + i32::from(p[2]));
+            }
+        }
+    }
+    lum.sort_unstable();
+    let share = lum.len() as f64 / f64::from(w * h);
+    assert!(share > 0.005 && share < 0.6, "model covers {share}");
+    let (dark, bright) = (lum[lum.len() / 10], lum[lum.len() * 9 / 10]);
+    assert!(bright - dark > 60, "flat shading: {dark}..{bright}");
+    // The same aircraft from 300 km is a magenta symbol.
+    let far = common::camera(8.0, 46.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let img = render(&mut off, &far, &mut layer, "model-far");
+    assert_eq!(layer.stats().models, 0);
+    let c = project(off.globe(), 8.0, 46.0, 9_500.0);
+    assert!(pixels_of(&img, MAGENTA, c, 15.0).len() > 20);
+}
