@@ -41,11 +41,9 @@ pub enum Command {
         #[command(subcommand)]
         command: TileCommand,
     },
-    /// Air traffic records: make synthetic ones, summarise any.
-    Traffic {
-        #[command(subcommand)]
-        command: crate::traffic_cmd::TrafficCommand,
-    },
+    /// Air traffic: replay a record on the planet in a window (--record FILE), or make
+    /// synthetic records and summarise any (subcommands).
+    Traffic(crate::traffic_cmd::TrafficArgs),
     /// Build one tile's adaptive mesh from an elevation PNG, or describe a quantized-mesh file.
     Mesh(MeshArgs),
     /// Geodesy and tile naming conversions.
@@ -160,13 +158,53 @@ pub struct RenderArgs {
     /// Give up waiting for tiles after this many seconds (at most a day).
     #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
     pub timeout_s: f64,
+    #[command(flatten)]
+    pub traffic: TrafficSceneArgs,
+}
+
+/// Air traffic drawn in a rendered or benchmarked scene.
+#[derive(Args, Clone, Default)]
+pub struct TrafficSceneArgs {
+    /// An air traffic record (OpenSky state-vector CSV, plain or gzip) whose aircraft are
+    /// drawn at --time.
+    #[arg(long)]
+    pub traffic: Option<PathBuf>,
+    /// The moment drawn: RFC 3339 (2018-08-01T12:00:00Z) or Unix seconds (default: the
+    /// record's first moment).
+    #[arg(long, requires = "traffic")]
+    pub time: Option<String>,
 }
 
 #[derive(Args)]
 pub struct BenchArgs {
     /// Camera path JSON (see paths/alps-dive.json).
-    #[arg(long, conflicts_with_all = ["from", "to", "soak"], required_unless_present_any = ["from", "soak"])]
+    #[arg(long, conflicts_with_all = ["from", "to", "soak", "traffic"], required_unless_present_any = ["from", "soak", "traffic"])]
     pub path: Option<PathBuf>,
+    /// Traffic benchmark: replay this record (OpenSky state-vector CSV, plain or gzip) from
+    /// --time at --speed for --frames frames at --fps, with the camera still at --camera
+    /// (default: over the aircraft), and report the cost of ticks, of the layer's frames and
+    /// of whole frames with and without the traffic.
+    #[arg(long, conflicts_with_all = ["from", "to", "soak"])]
+    pub traffic: Option<PathBuf>,
+    /// Traffic benchmark: the first moment replayed (RFC 3339 or Unix seconds; default: when
+    /// the most aircraft are in the air).
+    #[arg(long, requires = "traffic")]
+    pub time: Option<String>,
+    /// Traffic benchmark: seconds of record per second of frames.
+    #[arg(
+        long,
+        default_value_t = 1.0,
+        requires = "traffic",
+        allow_negative_numbers = true
+    )]
+    pub speed: f64,
+    /// Traffic benchmark: frames replayed.
+    #[arg(long, default_value_t = 300, requires = "traffic")]
+    pub frames: u32,
+    /// Traffic benchmark: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default: looking down on the
+    /// aircraft).
+    #[arg(long, allow_hyphen_values = true, requires = "traffic")]
+    pub camera: Option<String>,
     /// Soak test: fly between random views for this many seconds in real time, printing one
     /// JSON line per second (resident memory, cache bytes, GPU tiles, loads, failures).
     #[arg(long, conflicts_with_all = ["from", "to"])]

@@ -165,10 +165,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             println!("{line}");
             Ok(())
         }
-        Command::Traffic { command } => {
-            println!("{}", traffic_cmd::run(command)?);
-            Ok(())
-        }
+        Command::Traffic(a) => match a.command {
+            Some(command) => {
+                println!("{}", traffic_cmd::run(command)?);
+                Ok(())
+            }
+            None => traffic_cmd::view(a.view),
+        },
         Command::Mesh(args) => {
             let report = mesh_cmd::run(&args)?;
             if args.json {
@@ -212,5 +215,6 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         height,
         exit_after: a.exit_after.map(Duration::from_secs_f64),
         vectors: args::vector_layer(&a.globe)?,
+        traffic: None,
     })
 }

@@ -33,14 +33,21 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         args::check_writable(s)?;
     }
     let mut vectors = args::vector_layer(&a.globe)?;
+    let mut traffic = match &a.traffic.traffic {
+        Some(path) => Some(crate::traffic_cmd::scene(
+            path,
+            a.traffic.time.as_deref(),
+            None,
+        )?),
+        None => None,
+    };
     let mut off = Headless::new(&builder, width, height)?;
     let timeout = Duration::from_secs_f64(a.timeout_s);
     let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);
     let progress = LoadProgress::new();
     let mut show = |r: &FrameReport| progress.show(r);
     let mut frame = {
-        let mut overlays: Vec<&mut dyn Overlay> =
-            vectors.iter_mut().map(|v| v as &mut dyn Overlay).collect();
+        let mut overlays = overlays(&mut vectors, &mut traffic);
         off.render_complete_reporting(&view, timeout, &mut overlays, &mut show)?
     };
     // Above the ground of streamed data: the ground is known once the tiles under the
@@ -51,8 +58,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             break;
         }
         view = placed;
-        let mut overlays: Vec<&mut dyn Overlay> =
-            vectors.iter_mut().map(|v| v as &mut dyn Overlay).collect();
+        let mut overlays = overlays(&mut vectors, &mut traffic);
         frame = off.render_complete_reporting(&view, timeout, &mut overlays, &mut show)?;
     }
     progress.finish();
@@ -127,12 +133,34 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                     "gpu_bytes": s.gpu_bytes,
                 })
             }),
+            "traffic": traffic.as_ref().map(|t| {
+                let mut v = crate::traffic_cmd::stats_json(&t.layer.stats());
+                if let Some(m) = v.as_object_mut() {
+                    m.insert("time".into(), json!(crate::traffic_cmd::format_time(t.time_s)));
+                }
+                v
+            }),
         });
         let text = serde_json::to_string_pretty(&stats)? + "\n";
         globus_tiling::files::write_atomic(path, text.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+/// The scene's overlays, in drawing order: vector data, then traffic.
+fn overlays<'a>(
+    vectors: &'a mut Option<globus_engine::VectorLayer>,
+    traffic: &'a mut Option<crate::traffic_cmd::Scene>,
+) -> Vec<&'a mut dyn Overlay> {
+    let mut out: Vec<&mut dyn Overlay> = Vec::new();
+    if let Some(v) = vectors.as_mut() {
+        out.push(v);
+    }
+    if let Some(t) = traffic.as_mut() {
+        out.push(&mut t.layer);
+    }
+    out
 }
 
 /// Tiles drawn and still loading, on one line of stderr while the picture completes, if

@@ -1,13 +1,198 @@
-//! `globus traffic`: synthetic records and a record's summary.
+//! `globus traffic`: a record replayed in the viewer, synthetic records, a record's
+//! summary; and the traffic scene `render` and `bench` draw.
 
 use std::fs::File;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
+use globus_engine::traffic::{Replay, ReplayOptions};
+use globus_engine::{CameraSpec, TrafficLayer, TrafficStats};
 use globus_traffic::synth::{self, SynthOptions};
 use globus_traffic::{AircraftKind, read_record};
 use serde_json::json;
+
+use crate::args::{self, GlobeArgs};
+use crate::viewer;
+
+/// `globus traffic`: a subcommand, or the replay viewer's options.
+#[derive(Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct TrafficArgs {
+    #[command(subcommand)]
+    pub command: Option<TrafficCommand>,
+    #[command(flatten)]
+    pub view: TrafficViewArgs,
+}
+
+/// The replay viewer: `globus traffic --record FILE`.
+#[derive(Args)]
+pub struct TrafficViewArgs {
+    /// The record to replay: OpenSky state-vector CSV, plain or gzip (e.g.
+    /// ../shared/data/traffic-switzerland-2018-08-01.csv.gz). Space pauses, + and - double
+    /// and halve the speed, a click selects an aircraft (printed as JSON), C follows it.
+    #[arg(long, required = true)]
+    pub record: Option<PathBuf>,
+    /// Seconds of record per second shown (up to 10000).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    pub speed: f64,
+    /// Where the replay starts: RFC 3339 or Unix seconds (default: the record's first
+    /// moment).
+    #[arg(long)]
+    pub start: Option<String>,
+    /// Start camera LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default: looking down on the
+    /// record's aircraft).
+    #[arg(long, allow_hyphen_values = true)]
+    pub camera: Option<String>,
+    /// ALT_M is above the ground under the camera.
+    #[arg(long)]
+    pub above_ground: bool,
+    /// Window size, WxH.
+    #[arg(long, default_value = "1280x720")]
+    pub size: String,
+    #[command(flatten)]
+    pub globe: GlobeArgs,
+    /// Close the window after this many seconds (for automated checks).
+    #[arg(long)]
+    pub exit_after: Option<f64>,
+}
+
+/// The fastest replay, seconds of record per second.
+pub const MAX_SPEED: f64 = 10_000.0;
+
+/// A record ready to draw: its replay at a moment, and the layer drawing it.
+pub struct Scene {
+    /// The replay.
+    pub replay: Replay,
+    /// The layer, holding the aircraft at `time_s`.
+    pub layer: TrafficLayer,
+    /// The moment drawn, Unix seconds.
+    pub time_s: f64,
+}
+
+/// Reads a record and replays it to `time` (RFC 3339 or Unix seconds; default `default`, or
+/// the record's first moment).
+pub fn scene(path: &Path, time: Option<&str>, default: Option<f64>) -> anyhow::Result<Scene> {
+    let record = read_record(path)?;
+    let Some((first, last)) = record.time_span_s() else {
+        bail!("{}: the record holds no positions", path.display());
+    };
+    let time_s = match time {
+        Some(t) => parse_time(t, "--time")?,
+        None => default.unwrap_or(first),
+    };
+    if time_s < first - 3_600.0 || time_s > last + 3_600.0 {
+        tracing::warn!(
+            "{}: {} is outside the record ({} to {}): no aircraft to draw",
+            path.display(),
+            format_time(time_s),
+            format_time(first),
+            format_time(last)
+        );
+    }
+    let mut replay = Replay::new(record, ReplayOptions::default());
+    let mut layer = TrafficLayer::new();
+    layer
+        .play(&mut replay, time_s)
+        .with_context(|| format!("{}: replaying", path.display()))?;
+    Ok(Scene {
+        replay,
+        layer,
+        time_s,
+    })
+}
+
+/// A camera looking straight down on a record's aircraft: over the median of every report,
+/// high enough to see nine in ten of them.
+pub fn default_camera(replay: &Replay) -> CameraSpec {
+    let mut lons = Vec::new();
+    let mut lats = Vec::new();
+    for t in &replay.record().tracks {
+        for r in t.reports.iter().step_by(8) {
+            lons.push(r.lon_deg);
+            lats.push(r.lat_deg);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let (lon, lat) = (median(&mut lons), median(&mut lats));
+    let mut spread: Vec<f64> = lons
+        .iter()
+        .zip(&lats)
+        .map(|(&x, &y)| {
+            let dx = (x - lon) * lat.to_radians().cos();
+            (dx * dx + (y - lat) * (y - lat)).sqrt() * 111_000.0
+        })
+        .collect();
+    spread.sort_by(f64::total_cmp);
+    let reach_m = spread
+        .get(spread.len() * 9 / 10)
+        .copied()
+        .unwrap_or(100_000.0);
+    CameraSpec {
+        lon_deg: lon,
+        lat_deg: lat,
+        alt_m: (reach_m * 1.9).clamp(30_000.0, 8.0e6),
+        heading_deg: 0.0,
+        pitch_deg: -90.0,
+        above_ground: false,
+    }
+}
+
+/// The traffic layer's figures as JSON.
+pub fn stats_json(s: &TrafficStats) -> serde_json::Value {
+    json!({
+        "aircraft": s.aircraft,
+        "models": s.models,
+        "labels": s.labels,
+        "labels_wanted": s.labels_wanted,
+        "label_placement_us": s.label_placement_s * 1e6,
+        "trail_segments": s.trail_segments,
+        "draw_calls": s.draw_calls,
+        "gpu_bytes": s.gpu_bytes,
+        "prepare_us": s.prepare_s * 1e6,
+        "apply_us": s.apply_s * 1e6,
+    })
+}
+
+/// `globus traffic --record FILE`: the viewer on a replay.
+pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
+    let Some(record) = &a.record else {
+        bail!("traffic needs --record FILE, or a subcommand (see globus traffic --help)");
+    };
+    if !(a.speed > 0.0 && a.speed <= MAX_SPEED) {
+        bail!(
+            "--speed {} must be above 0 and at most {MAX_SPEED}",
+            a.speed
+        );
+    }
+    if let Some(s) = a.exit_after
+        && !(s > 0.0 && s.is_finite())
+    {
+        bail!("--exit-after {s} must be a positive number of seconds");
+    }
+    let (width, height) = args::parse_size(&a.size)?;
+    let globe = args::globe_builder(&a.globe)?;
+    let vectors = args::vector_layer(&a.globe)?;
+    let scene = scene(record, a.start.as_deref(), None)?;
+    let camera = match &a.camera {
+        Some(c) => args::parse_camera(c, a.above_ground)?,
+        None => default_camera(&scene.replay),
+    };
+    viewer::run(viewer::ViewerOptions {
+        globe,
+        camera,
+        fov_deg: a.globe.fov_deg,
+        width,
+        height,
+        exit_after: a.exit_after.map(Duration::from_secs_f64),
+        vectors,
+        traffic: Some(viewer::ViewerTraffic::new(scene, a.speed)),
+    })
+}
 
 #[derive(Subcommand)]
 pub enum TrafficCommand {

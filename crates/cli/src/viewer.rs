@@ -9,7 +9,12 @@
 //! * W/A/S/D fly forward/left/back/right, Q/E down/up, at a speed proportional to the height
 //!   above ground; Esc quits.
 //!
-//! The title shows frames per second, tiles drawn and tiles loading.
+//! With traffic (`globus traffic --record FILE`): Space pauses the replay, + and - double and
+//! halve its speed, a click on an aircraft selects it (printed as one JSON line), C makes the
+//! camera follow the selected aircraft (again: stop following).
+//!
+//! The title shows frames per second, tiles drawn and tiles loading (and the replay's moment,
+//! speed and aircraft).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -17,7 +22,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 use globus_engine::{
-    CameraController, CameraSpec, Globe, GlobeBuilder, GpuContext, VectorLayer, View,
+    CameraController, CameraSpec, DVec3, Globe, GlobeBuilder, GpuContext, Overlay, VectorLayer,
+    View,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -42,6 +48,60 @@ pub struct ViewerOptions {
     pub exit_after: Option<Duration>,
     /// The vector data to draw (see [`crate::args::vector_layer`]).
     pub vectors: Option<VectorLayer>,
+    /// A traffic record replayed over the globe.
+    pub traffic: Option<ViewerTraffic>,
+}
+
+/// A replay shown in the viewer: its clock runs at `speed` seconds of record per second.
+pub struct ViewerTraffic {
+    scene: crate::traffic_cmd::Scene,
+    speed: f64,
+    paused: bool,
+    /// The followed aircraft and where it was last frame.
+    follow: Option<(u64, DVec3)>,
+}
+
+impl ViewerTraffic {
+    /// A replay of `scene` from its moment.
+    pub fn new(scene: crate::traffic_cmd::Scene, speed: f64) -> Self {
+        Self {
+            scene,
+            speed,
+            paused: false,
+            follow: None,
+        }
+    }
+
+    /// Moves the clock by `dt` of wall time.
+    fn tick(&mut self, dt: Duration) {
+        if !self.paused {
+            self.scene.time_s += dt.as_secs_f64() * self.speed;
+        }
+        if let Err(e) = self
+            .scene
+            .layer
+            .play(&mut self.scene.replay, self.scene.time_s)
+        {
+            tracing::warn!("replay: {e}");
+        }
+    }
+
+    /// The selected aircraft as one JSON line.
+    fn describe(&self, id: u64) -> serde_json::Value {
+        let time = self.scene.time_s;
+        let state = self.scene.layer.fleet().state_of(id, time);
+        let track = self.scene.replay.track_of(id);
+        serde_json::json!({
+            "icao24": format!("{:06x}", globus_engine::traffic::Replay::icao24_of(id)),
+            "callsign": track.map(|t| t.callsign.trim()),
+            "typecode": track.map(|t| t.typecode.as_str()),
+            "time": crate::traffic_cmd::format_time(time),
+            "lon": state.map(|s| s.0[0]),
+            "lat": state.map(|s| s.0[1]),
+            "altitude_m": state.map(|s| s.0[2]),
+            "heading_deg": state.map(|s| s.1[0]),
+        })
+    }
 }
 
 /// Seconds a fly-to takes.
@@ -63,8 +123,10 @@ pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
     // Sources first: one that cannot be opened fails before a window opens.
     options.globe.open_sources()?;
     let vectors = options.vectors.take();
+    let traffic = options.traffic.take();
     let mut app = App {
         vectors,
+        traffic,
         options,
         state: None,
         error: None,
@@ -82,6 +144,7 @@ pub fn run(mut options: ViewerOptions) -> anyhow::Result<()> {
 struct App {
     options: ViewerOptions,
     vectors: Option<VectorLayer>,
+    traffic: Option<ViewerTraffic>,
     state: Option<State>,
     error: Option<anyhow::Error>,
     started: Instant,
@@ -110,6 +173,7 @@ struct State {
     last_tick: Instant,
     fps: FpsCounter,
     vectors: Option<VectorLayer>,
+    traffic: Option<ViewerTraffic>,
     /// Where the left button went down (a release close to it is a click).
     pressed_at: Option<PhysicalPosition<f64>>,
 }
@@ -129,6 +193,7 @@ impl ApplicationHandler for App {
             Ok(mut s) => {
                 s.window.request_redraw();
                 s.vectors = self.vectors.take();
+                s.traffic = self.traffic.take();
                 self.state = Some(s);
             }
             Err(e) => {
@@ -268,6 +333,7 @@ impl State {
                 fps: 0.0,
             },
             vectors: None,
+            traffic: None,
             pressed_at: None,
         })
     }
@@ -312,6 +378,22 @@ impl State {
                     }
                 }
             }
+            KeyCode::Space if self.traffic.is_some() => {
+                if let Some(t) = self.traffic.as_mut() {
+                    t.paused = !t.paused;
+                }
+            }
+            KeyCode::Equal | KeyCode::NumpadAdd if self.traffic.is_some() => {
+                if let Some(t) = self.traffic.as_mut() {
+                    t.speed = (t.speed * 2.0).min(crate::traffic_cmd::MAX_SPEED);
+                }
+            }
+            KeyCode::Minus | KeyCode::NumpadSubtract if self.traffic.is_some() => {
+                if let Some(t) = self.traffic.as_mut() {
+                    t.speed = (t.speed / 2.0).max(1.0 / 64.0);
+                }
+            }
+            KeyCode::KeyC if self.traffic.is_some() => self.toggle_follow(),
             KeyCode::Home => {
                 let to = View {
                     width_px: self.config.width,
@@ -363,8 +445,60 @@ impl State {
         };
     }
 
-    /// A click: prints the picked vector feature's properties (one JSON line), or the
-    /// ground position.
+    /// C: follow the selected aircraft (the camera moves with it, keeping its view), or
+    /// stop following.
+    fn toggle_follow(&mut self) {
+        let Some(t) = self.traffic.as_mut() else {
+            return;
+        };
+        if t.follow.take().is_some() {
+            return;
+        }
+        let Some(id) = t.scene.layer.selected() else {
+            tracing::warn!("nothing to follow: click an aircraft first");
+            return;
+        };
+        let Some(at) = t.scene.layer.drawn_position(id) else {
+            return;
+        };
+        // Look at it from 3 km behind and above, then keep that offset.
+        let view = *self.controller.view();
+        let up = self
+            .globe
+            .ellipsoid()
+            .geodetic_normal(at)
+            .unwrap_or(DVec3::Z);
+        let back = (view.position - at)
+            .reject_from(up)
+            .normalize_or(up.any_orthonormal_vector());
+        let eye = at + back * 2_500.0 + up * 1_500.0;
+        if let Some(to) = View::look_at(eye, at, up, view.fov_y_rad, view.width_px, view.height_px)
+        {
+            self.controller.set_view(to);
+        }
+        t.follow = Some((id, at));
+    }
+
+    /// Keeps a followed aircraft where it is on the screen: the camera moves as it moved.
+    fn follow(&mut self) {
+        let Some(t) = self.traffic.as_mut() else {
+            return;
+        };
+        let Some((id, last)) = t.follow else {
+            return;
+        };
+        let Some(now) = t.scene.layer.drawn_position(id) else {
+            t.follow = None;
+            return;
+        };
+        let mut view = *self.controller.view();
+        view.position += now - last;
+        self.controller.set_view(view);
+        t.follow = Some((id, now));
+    }
+
+    /// A click: selects the aircraft under the cursor (printed as one JSON line), or prints
+    /// the picked vector feature's properties, or the ground position.
     fn click(&mut self, x: f64, y: f64) {
         let pick = match self.globe.pick(x, y) {
             Ok(Some(p)) => p,
@@ -378,6 +512,20 @@ impl State {
             .surface()
             .and_then(|p| self.globe.cartographic(p))
             .map(|c| [c.lon_deg(), c.lat_deg(), c.height_m]);
+        if let Some(t) = self.traffic.as_mut() {
+            let aircraft = pick
+                .object()
+                .and_then(|o| t.scene.layer.aircraft_for_pick(o));
+            if let Some(id) = aircraft {
+                t.scene.layer.select(Some(id));
+                println!("{}", t.describe(id));
+                return;
+            }
+            if pick.object().is_none() {
+                t.scene.layer.select(None);
+                t.follow = None;
+            }
+        }
         let feature = pick
             .object()
             .and_then(|o| self.vectors.as_ref()?.feature_for_pick(o));
@@ -429,6 +577,9 @@ impl State {
         let right = axis(KeyCode::KeyD, KeyCode::KeyA);
         let up = axis(KeyCode::KeyE, KeyCode::KeyQ);
         self.controller.fly(&self.globe, forward, right, up, dt);
+        if let Some(t) = self.traffic.as_mut() {
+            t.tick(dt);
+        }
     }
 
     fn redraw(&mut self) -> anyhow::Result<()> {
@@ -456,10 +607,18 @@ impl State {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        match self.vectors.as_mut() {
-            Some(v) => self.globe.render(&mut encoder, &target, &mut [v]),
-            None => self.globe.render(&mut encoder, &target, &mut []),
+        {
+            let mut overlays: Vec<&mut dyn Overlay> = Vec::new();
+            if let Some(v) = self.vectors.as_mut() {
+                overlays.push(v);
+            }
+            if let Some(t) = self.traffic.as_mut() {
+                overlays.push(&mut t.scene.layer);
+            }
+            self.globe.render(&mut encoder, &target, &mut overlays);
         }
+        // The followed aircraft's new position is known once the layer placed it.
+        self.follow();
         self.gpu.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
         self.gpu.queue.present(frame);
@@ -470,9 +629,18 @@ impl State {
             self.fps.fps = f64::from(self.fps.frames) / elapsed;
             self.fps.frames = 0;
             self.fps.since = Instant::now();
+            let traffic = self.traffic.as_ref().map_or(String::new(), |t| {
+                format!(
+                    " | {} x{}{} | {} aircraft",
+                    crate::traffic_cmd::format_time(t.scene.time_s),
+                    t.speed,
+                    if t.paused { " paused" } else { "" },
+                    t.scene.layer.stats().aircraft
+                )
+            });
             self.window.set_title(&format!(
                 "Globus | {:.1} fps | {} tiles drawn | {} loading | {} imagery loading | {:.0} m \
-                 above ground",
+                 above ground{traffic}",
                 self.fps.fps,
                 report.draw.tiles,
                 report.wanted,

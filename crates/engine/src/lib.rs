@@ -64,9 +64,11 @@ mod frame;
 mod globe;
 mod gpu_util;
 mod headless;
+pub mod labels;
 pub mod memory;
 pub mod overlay;
 mod query;
+pub mod text;
 pub mod traffic;
 pub mod vector;
 

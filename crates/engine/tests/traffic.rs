@@ -131,7 +131,8 @@ fn aircraft_are_drawn_where_their_samples_put_them_within_a_pixel_from_orbit_and
             assert_eq!(layer.aircraft_for_pick(object), Some(id), "{name}");
         }
         assert_eq!(layer.stats().aircraft, 2);
-        assert!(layer.stats().draw_calls <= 3, "{:?}", layer.stats());
+        // Trails, symbols, label leaders and glyphs: a draw call each here.
+        assert!(layer.stats().draw_calls <= 4, "{:?}", layer.stats());
     }
 }
 
@@ -289,4 +290,128 @@ fn a_close_view_draws_the_lit_model_and_a_far_one_the_symbol() {
     assert_eq!(layer.stats().models, 0);
     let c = project(off.globe(), 8.0, 46.0, 9_500.0);
     assert!(pixels_of(&img, MAGENTA, c, 15.0).len() > 20);
+}
+
+/// Two hundred aircraft crowded over the Alps: the labels drawn never overlap, each sits at
+/// a corner of its own aircraft, every changed pixel of the picture is a label's (inside its
+/// box or on its leader), and the aircraft behind the planet has none.
+#[test]
+fn labels_are_decluttered_at_their_aircraft_and_hidden_behind_the_planet() {
+    let (w, h) = (640u32, 480u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let style_without_labels = globus_engine::TrafficStyle {
+        labels: false,
+        trails: false,
+        ..Default::default()
+    };
+    let mut with = TrafficLayer::new();
+    let mut without = TrafficLayer::with_options(
+        Default::default(),
+        style_without_labels,
+        globus_engine::traffic::DEFAULT_PICK_BASE,
+    );
+    with.set_style(globus_engine::TrafficStyle {
+        trails: false,
+        ..Default::default()
+    });
+    let mut batch = Batch::default();
+    let mut seed = 7u64;
+    let mut next = || {
+        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for id in 0..200u64 {
+        let (lon, lat) = (2.0 + next() * 12.0, 43.5 + next() * 6.0);
+        let mut s = sample(
+            id + 1,
+            0.0,
+            lon,
+            lat,
+            9_000.0 + next() * 3_000.0,
+            (next() * 360.0) as f32,
+            MAGENTA,
+        );
+        s.callsign = callsign_bytes(&format!("T{id}"));
+        batch.push(s);
+    }
+    // And one on the far side of the planet.
+    batch.push(sample(999, 0.0, -172.0, -46.0, 11_000.0, 0.0, MAGENTA));
+    for layer in [&mut with, &mut without] {
+        layer.apply(&batch).expect("apply");
+        layer.set_time(0.0);
+    }
+    let view =
+        common::camera(8.0, 46.5, 900_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let plain = render(&mut off, &view, &mut without, "labels-off");
+    let img = render(&mut off, &view, &mut with, "labels");
+    let labels: Vec<(u64, [f32; 4], f32)> = with.drawn_labels().collect();
+    assert!(labels.len() > 15, "only {} labels", labels.len());
+    assert!(
+        labels.iter().all(|l| l.0 != 999),
+        "a label for the aircraft behind the planet"
+    );
+    for (i, a) in labels.iter().enumerate() {
+        for b in &labels[i + 1..] {
+            let o = a.1[0] < b.1[2] && b.1[0] < a.1[2] && a.1[1] < b.1[3] && b.1[1] < a.1[3];
+            assert!(!o, "labels of {} and {} overlap", a.0, b.0);
+        }
+        // At a corner of its own aircraft: the box's nearest corner within the symbol's
+        // clearance (9 px + 4 px) of where the aircraft projects, diagonally.
+        let s = &batch;
+        let k = s
+            .ids
+            .iter()
+            .position(|&id| id == a.0)
+            .expect("a known aircraft");
+        let [lon, lat, alt] = s.positions[k];
+        let at = project(off.globe(), lon, lat, alt);
+        let dx = (at.x - f64::from(a.1[0]))
+            .abs()
+            .min((at.x - f64::from(a.1[2])).abs());
+        let dy = (at.y - f64::from(a.1[1]))
+            .abs()
+            .min((at.y - f64::from(a.1[3])).abs());
+        assert!(
+            (dx - 13.0).abs() < 1.0 && (dy - 13.0).abs() < 1.0,
+            "label of {} off its aircraft: {dx} {dy}",
+            a.0
+        );
+        assert!(
+            (a.2 - 1.0).abs() < 1e-6,
+            "a still picture shows labels whole"
+        );
+    }
+    // Every pixel the labels changed lies in a box (with its halo) or on a leader, and
+    // every box has ink in it.
+    let inside = |x: f64, y: f64, b: &[f32; 4], m: f64| {
+        x >= f64::from(b[0]) - m
+            && x <= f64::from(b[2]) + m
+            && y >= f64::from(b[1]) - m
+            && y <= f64::from(b[3]) + m
+    };
+    let mut ink = vec![0u32; labels.len()];
+    let mut stray = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let (p, b) = (img.get(x, y), plain.get(x, y));
+            if (0..3).all(|c| (i32::from(p[c]) - i32::from(b[c])).abs() <= 12) {
+                continue;
+            }
+            let (fx, fy) = (f64::from(x) + 0.5, f64::from(y) + 0.5);
+            let mut owned = false;
+            for (i, l) in labels.iter().enumerate() {
+                if inside(fx, fy, &l.1, 1.0) {
+                    ink[i] += 1;
+                    owned = true;
+                }
+            }
+            // Leaders run from the symbol's edge to the box: within the 13 px clearance
+            // square round some aircraft and its box.
+            if !owned && !labels.iter().any(|l| inside(fx, fy, &l.1, 14.0)) {
+                stray += 1;
+            }
+        }
+    }
+    assert_eq!(stray, 0, "pixels changed away from every label");
+    assert!(ink.iter().all(|&n| n > 20), "a label without text: {ink:?}");
 }

@@ -1,9 +1,11 @@
 //! `globus bench`: a camera path replayed offscreen (`path`), a jump between two views
-//! (`jump`), or a soak of random flights (`soak`), each printing JSON.
+//! (`jump`), a soak of random flights (`soak`), or a traffic record replayed (`traffic`),
+//! each printing JSON.
 
 mod jump;
 mod path;
 mod soak;
+mod traffic;
 
 use anyhow::bail;
 
@@ -23,6 +25,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             bail!("--soak {seconds} must be a positive number of seconds");
         }
         return soak::run(&a, &builder, seconds, (width, height));
+    }
+    if let Some(record) = &a.traffic {
+        return traffic::run(&a, &builder, record, (width, height));
     }
     let Some(path_file) = &a.path else {
         bail!("bench needs --path FILE.json, or --from CAMERA --to CAMERA");

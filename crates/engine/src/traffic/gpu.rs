@@ -12,6 +12,7 @@ use bytemuck::{Pod, Zeroable};
 use super::models::ModelMesh;
 use crate::gpu_util::{Growing, buffer, buffer_entry, texture_entry};
 use crate::overlay::FrameContext;
+use crate::text::GlyphAtlas;
 
 /// One aircraft as the shaders read it (64 bytes); mirrored in `traffic.wgsl`.
 #[repr(C)]
@@ -21,16 +22,20 @@ pub(crate) struct AircraftGpu {
     pub position: [f32; 3],
     /// sRGB colour, packed.
     pub colour: u32,
-    /// Nose direction (unit, ECEF axes).
-    pub forward: [f32; 3],
+    /// The geodetic normal at the aircraft (unit, ECEF axes): the shaders turn it, the
+    /// heading and the pitch into the airframe's axes.
+    pub normal: [f32; 3],
     /// [`bits`] and the kind in bits 8-9.
     pub bits: u32,
-    /// Up through the airframe (unit).
-    pub up: [f32; 3],
-    /// Trail ring head (low 16 bits) and length (high 16).
-    pub ring: u32,
     /// The trail anchor minus the eye, metres.
     pub anchor: [f32; 3],
+    /// Trail ring head (low 16 bits) and length (high 16).
+    pub ring: u32,
+    /// Heading (clockwise from north) and pitch, radians.
+    pub heading_rad: f32,
+    pub pitch_rad: f32,
+    /// Trail points older than now (low 16 bits) and the stride drawn (high 16).
+    pub trail: u32,
     pub spare: u32,
 }
 
@@ -58,6 +63,49 @@ pub(crate) struct Uniforms {
     pub kinds: [[f32; 4]; 4],
 }
 
+/// A placed label as the shaders read it (48 bytes); mirrored in `traffic.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub(crate) struct LabelGpu {
+    /// The aircraft on screen (pixels), its reversed-Z depth, the label's opacity.
+    pub anchor: [f32; 2],
+    pub depth: f32,
+    pub opacity: f32,
+    /// The box's top-left and size, pixels.
+    pub origin: [f32; 2],
+    pub size: [f32; 2],
+    /// Text colour (sRGB, packed) and where the leader starts from the anchor (pixels).
+    pub colour: u32,
+    pub clearance: f32,
+    pub spare: [f32; 2],
+}
+
+/// One glyph drawn: its label, its atlas glyph, its quad's top-left from the label's origin
+/// (pixels).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub(crate) struct GlyphInstance {
+    pub label: u32,
+    pub glyph: u32,
+    pub at: [f32; 2],
+}
+
+/// An atlas glyph for the shaders: texel rectangle, offset from the pen.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct GlyphGpu {
+    rect: [f32; 4],
+    offset: [f32; 2],
+    spare: [f32; 2],
+}
+
+/// How labels are drawn: pixels per atlas pixel, atlas size, halo width in field units.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(crate) struct LabelStyle {
+    pub scale: [f32; 4],
+}
+
 /// Model vertex (24 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -71,6 +119,10 @@ struct ModelVertex {
 /// runs of dirty pages in one write.
 pub(crate) const PAGE_POINTS: usize = 256;
 
+/// Trail draws: instances whose trails need at most this many segments go together (one
+/// draw each, of that many segments per instance; the last holds the rest).
+pub(crate) const TRAIL_BUCKETS: [u32; 3] = [6, 20, u32::MAX];
+
 /// The shader.
 pub const SHADER: &str = include_str!("traffic.wgsl");
 
@@ -78,6 +130,16 @@ pub(crate) struct Gpu {
     trail: wgpu::RenderPipeline,
     model: wgpu::RenderPipeline,
     symbol: wgpu::RenderPipeline,
+    leader: wgpu::RenderPipeline,
+    glyph: wgpu::RenderPipeline,
+    atlas: wgpu::TextureView,
+    atlas_sampler: wgpu::Sampler,
+    atlas_glyphs: wgpu::Buffer,
+    label_style: wgpu::Buffer,
+    labels: Growing,
+    glyphs: Growing,
+    label_count: u32,
+    glyph_count: u32,
     layout: wgpu::BindGroupLayout,
     uniforms: wgpu::Buffer,
     aircraft: Growing,
@@ -88,14 +150,20 @@ pub(crate) struct Gpu {
     instances: Growing,
     /// Instance range of each kind this frame (into `instances`).
     instance_ranges: [Range<u32>; 4],
-    bind_group: Option<(wgpu::BindGroup, [u64; 2], wgpu::TextureView)>,
-    /// Slots drawn (symbols) and trail points per slot, this frame.
+    trail_instances: Growing,
+    /// Instance range and segments per instance of each trail bucket this frame.
+    trail_ranges: [(Range<u32>, u32); 3],
+    bind_group: Option<(wgpu::BindGroup, [u64; 4], wgpu::TextureView)>,
+    /// Slots drawn (symbols) this frame.
     slots: u32,
-    trail_per_slot: u32,
 }
 
 impl Gpu {
-    pub(crate) fn new(frame: &FrameContext<'_>, meshes: &[ModelMesh; 4]) -> Self {
+    pub(crate) fn new(
+        frame: &FrameContext<'_>,
+        meshes: &[ModelMesh; 4],
+        text: &GlyphAtlas,
+    ) -> Self {
         let device = frame.device();
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("traffic"),
@@ -109,7 +177,22 @@ impl Gpu {
                 buffer_entry(0, Stage::VERTEX_FRAGMENT, wgpu::BufferBindingType::Uniform),
                 buffer_entry(1, Stage::VERTEX, storage),
                 buffer_entry(2, Stage::VERTEX, storage),
-                texture_entry(3, false, wgpu::TextureViewDimension::D2),
+                // The terrain's depth: symbols test it per fragment, labels per vertex.
+                wgpu::BindGroupLayoutEntry {
+                    visibility: Stage::VERTEX_FRAGMENT,
+                    ..texture_entry(3, false, wgpu::TextureViewDimension::D2)
+                },
+                texture_entry(4, true, wgpu::TextureViewDimension::D2),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: Stage::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                buffer_entry(6, Stage::VERTEX, storage),
+                buffer_entry(7, Stage::VERTEX, storage),
+                buffer_entry(8, Stage::VERTEX, storage),
+                buffer_entry(9, Stage::VERTEX_FRAGMENT, wgpu::BufferBindingType::Uniform),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -148,11 +231,17 @@ impl Gpu {
             })
         };
         // Trails: colour only, tested against the terrain and what the world pass drew.
+        let trail_attrs = wgpu::vertex_attr_array![0 => Uint32];
+        let trail_buffers = [Some(wgpu::VertexBufferLayout {
+            array_stride: 4,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &trail_attrs,
+        })];
         let trail = pipeline(
             "traffic trails",
             "trail_vs",
             "trail_fs",
-            &[],
+            &trail_buffers,
             formats.depth_test(false),
             &formats.colour_targets(blend, false),
         );
@@ -185,9 +274,26 @@ impl Gpu {
             "symbol_vs",
             "symbol_fs",
             &[],
-            no_depth_test,
+            no_depth_test.clone(),
             &formats.colour_targets(blend, true),
         );
+        let leader = pipeline(
+            "traffic label leaders",
+            "leader_vs",
+            "leader_fs",
+            &[],
+            no_depth_test.clone(),
+            &formats.colour_targets(blend, false),
+        );
+        let glyph = pipeline(
+            "traffic label glyphs",
+            "glyph_vs",
+            "glyph_fs",
+            &[],
+            no_depth_test,
+            &formats.colour_targets(blend, false),
+        );
+        let (atlas, atlas_sampler, atlas_glyphs) = upload_atlas(frame, text);
         let mut vertices = Vec::new();
         let mut model_ranges: [Range<u32>; 4] = Default::default();
         for (k, mesh) in meshes.iter().enumerate() {
@@ -215,6 +321,21 @@ impl Gpu {
             trail,
             model,
             symbol,
+            leader,
+            glyph,
+            atlas,
+            atlas_sampler,
+            atlas_glyphs,
+            label_style: buffer(
+                device,
+                "traffic label style",
+                size_of::<LabelStyle>() as u64,
+                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            ),
+            labels: Growing::new(device, "traffic labels", storage_usage, 48 * 256),
+            glyphs: Growing::new(device, "traffic label glyphs", storage_usage, 16 * 4096),
+            label_count: 0,
+            glyph_count: 0,
             layout,
             uniforms: buffer(
                 device,
@@ -233,9 +354,15 @@ impl Gpu {
                 4096,
             ),
             instance_ranges: Default::default(),
+            trail_instances: Growing::new(
+                device,
+                "traffic trail instances",
+                wgpu::BufferUsages::VERTEX,
+                4096,
+            ),
+            trail_ranges: Default::default(),
             bind_group: None,
             slots: 0,
-            trail_per_slot: 0,
         }
     }
 
@@ -245,6 +372,11 @@ impl Gpu {
             + self.trail_points.buffer.size()
             + self.models.size()
             + self.instances.buffer.size()
+            + self.trail_instances.buffer.size()
+            + self.labels.buffer.size()
+            + self.glyphs.buffer.size()
+            + self.atlas_glyphs.size()
+            + self.atlas.texture().size().width as u64 * self.atlas.texture().size().height as u64
             + self.uniforms.size()
     }
 
@@ -279,6 +411,24 @@ impl Gpu {
         );
     }
 
+    /// Writes the frame's labels and their glyphs.
+    pub(crate) fn write_labels(
+        &mut self,
+        frame: &FrameContext<'_>,
+        style: &LabelStyle,
+        labels: &[LabelGpu],
+        glyphs: &[GlyphInstance],
+    ) {
+        let (device, queue) = (frame.device(), frame.queue());
+        queue.write_buffer(&self.label_style, 0, bytemuck::bytes_of(style));
+        self.labels
+            .write(device, queue, bytemuck::cast_slice(labels));
+        self.glyphs
+            .write(device, queue, bytemuck::cast_slice(glyphs));
+        self.label_count = labels.len() as u32;
+        self.glyph_count = glyphs.len() as u32;
+    }
+
     /// Writes the frame's uniforms, aircraft and model instances, and (re)makes the bind
     /// group when a buffer or the depth texture changed.
     pub(crate) fn write_frame(
@@ -287,7 +437,7 @@ impl Gpu {
         uniforms: &Uniforms,
         aircraft: &[AircraftGpu],
         instances: &[Vec<u32>; 4],
-        trail_per_slot: u32,
+        trails: &[(Vec<u32>, u32); 3],
     ) {
         let (device, queue) = (frame.device(), frame.queue());
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(uniforms));
@@ -301,10 +451,22 @@ impl Gpu {
         }
         self.instances
             .write(device, queue, bytemuck::cast_slice(&flat));
+        flat.clear();
+        for (k, (list, segments)) in trails.iter().enumerate() {
+            let start = flat.len() as u32;
+            flat.extend_from_slice(list);
+            self.trail_ranges[k] = (start..flat.len() as u32, *segments);
+        }
+        self.trail_instances
+            .write(device, queue, bytemuck::cast_slice(&flat));
         self.slots = aircraft.len() as u32;
-        self.trail_per_slot = trail_per_slot;
         let depth = frame.terrain_depth();
-        let sizes = [self.aircraft.buffer.size(), self.trail_points.buffer.size()];
+        let sizes = [
+            self.aircraft.buffer.size(),
+            self.trail_points.buffer.size(),
+            self.labels.buffer.size(),
+            self.glyphs.buffer.size(),
+        ];
         if self
             .bind_group
             .as_ref()
@@ -330,14 +492,38 @@ impl Gpu {
                         binding: 3,
                         resource: wgpu::BindingResource::TextureView(depth),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: wgpu::BindingResource::TextureView(&self.atlas),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: wgpu::BindingResource::Sampler(&self.atlas_sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: self.atlas_glyphs.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 7,
+                        resource: self.labels.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 8,
+                        resource: self.glyphs.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 9,
+                        resource: self.label_style.as_entire_binding(),
+                    },
                 ],
             });
             self.bind_group = Some((group, sizes, depth.clone()));
         }
     }
 
-    /// Trails (if `trails`) then models: the world pass. Returns the draw calls.
-    pub(crate) fn draw_world(&self, pass: &mut wgpu::RenderPass<'_>, trails: bool) -> u32 {
+    /// Trails then models: the world pass. Returns the draw calls.
+    pub(crate) fn draw_world(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
         let Some((group, _, _)) = &self.bind_group else {
             return 0;
         };
@@ -346,10 +532,16 @@ impl Gpu {
         }
         let mut calls = 0;
         pass.set_bind_group(0, group, &[]);
-        if trails && self.trail_per_slot > 0 {
+        if self.trail_ranges.iter().any(|(r, _)| !r.is_empty()) {
             pass.set_pipeline(&self.trail);
-            pass.draw(0..self.slots * self.trail_per_slot * 6, 0..1);
-            calls += 1;
+            for (r, segments) in &self.trail_ranges {
+                if r.is_empty() {
+                    continue;
+                }
+                pass.set_vertex_buffer(0, instance_slice(&self.trail_instances, r));
+                pass.draw(0..segments * 6, 0..r.end - r.start);
+                calls += 1;
+            }
         }
         if self.instance_ranges.iter().any(|r| !r.is_empty()) {
             pass.set_pipeline(&self.model);
@@ -360,12 +552,7 @@ impl Gpu {
                 }
                 // The kind's instances as the instance buffer itself (no first-instance
                 // feature needed).
-                pass.set_vertex_buffer(
-                    1,
-                    self.instances
-                        .buffer
-                        .slice(u64::from(r.start) * 4..u64::from(r.end) * 4),
-                );
+                pass.set_vertex_buffer(1, instance_slice(&self.instances, r));
                 pass.draw(self.model_ranges[k].clone(), 0..r.end - r.start);
                 calls += 1;
             }
@@ -373,7 +560,8 @@ impl Gpu {
         calls
     }
 
-    /// Symbols: the screen-aligned pass. Returns the draw calls.
+    /// Symbols, then labels' leaders and glyphs: the screen-aligned pass. Returns the draw
+    /// calls.
     pub(crate) fn draw_symbols(&self, pass: &mut wgpu::RenderPass<'_>) -> u32 {
         let Some((group, _, _)) = &self.bind_group else {
             return 0;
@@ -384,6 +572,92 @@ impl Gpu {
         pass.set_bind_group(0, group, &[]);
         pass.set_pipeline(&self.symbol);
         pass.draw(0..self.slots * 6, 0..1);
-        1
+        let mut calls = 1;
+        if self.label_count > 0 {
+            pass.set_pipeline(&self.leader);
+            pass.draw(0..self.label_count * 6, 0..1);
+            calls += 1;
+        }
+        if self.glyph_count > 0 {
+            pass.set_pipeline(&self.glyph);
+            pass.draw(0..self.glyph_count * 6, 0..1);
+            calls += 1;
+        }
+        calls
     }
+}
+
+/// A range of u32 instances as a vertex buffer of their own (so draws need no first-instance
+/// feature).
+fn instance_slice<'a>(buffer: &'a Growing, r: &Range<u32>) -> wgpu::BufferSlice<'a> {
+    buffer
+        .buffer
+        .slice(u64::from(r.start) * 4..u64::from(r.end) * 4)
+}
+
+/// The glyph atlas as a texture, its sampler and its glyph table.
+fn upload_atlas(
+    frame: &FrameContext<'_>,
+    text: &GlyphAtlas,
+) -> (wgpu::TextureView, wgpu::Sampler, wgpu::Buffer) {
+    let device = frame.device();
+    let size = wgpu::Extent3d {
+        width: text.size[0],
+        height: text.size[1],
+        depth_or_array_layers: 1,
+    };
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("traffic glyph atlas"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::R8Unorm,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    frame.queue().write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        &text.texels,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(text.size[0]),
+            rows_per_image: Some(text.size[1]),
+        },
+        size,
+    );
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("traffic glyph atlas"),
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    let table: Vec<GlyphGpu> = text
+        .glyphs
+        .iter()
+        .map(|g| GlyphGpu {
+            rect: g.rect.map(|v| v as f32),
+            offset: g.offset,
+            spare: [0.0; 2],
+        })
+        .collect();
+    let glyphs = buffer(
+        device,
+        "traffic glyph table",
+        (table.len() * size_of::<GlyphGpu>()) as u64,
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+    );
+    frame
+        .queue()
+        .write_buffer(&glyphs, 0, bytemuck::cast_slice(&table));
+    (
+        texture.create_view(&wgpu::TextureViewDescriptor::default()),
+        sampler,
+        glyphs,
+    )
 }

@@ -17,6 +17,7 @@
 //! Picking: symbols and models write `pick_base + slot` into the id buffer;
 //! [`TrafficLayer::aircraft_for_pick`] maps a [`crate::Pick::object`] back to the aircraft.
 
+mod blocks;
 mod gpu;
 pub mod models;
 
@@ -26,14 +27,21 @@ use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_traffic::fleet::flags;
 use globus_traffic::{Fleet, FleetError, Sampled};
 
+use crate::labels::{LabelPlacer, LabelRequest, PlacedLabel};
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
+use crate::text::GlyphAtlas;
+use blocks::{BlockContent, LaidOut};
+use globus_geo::EllipsoidalOccluder;
 pub use globus_traffic::fleet::{callsign_bytes, flags as aircraft_flags};
 pub use globus_traffic::{
     AircraftKind, Batch, FleetError as BatchError, FleetOptions, Record, Replay, ReplayOptions,
     Sample, Step, read_record,
 };
 pub use gpu::SHADER;
-use gpu::{AircraftGpu, Gpu, PAGE_POINTS, Uniforms, bits};
+use gpu::{
+    AircraftGpu, GlyphInstance, Gpu, LabelGpu, LabelStyle, PAGE_POINTS, TRAIL_BUCKETS, Uniforms,
+    bits,
+};
 pub use models::{ModelMesh, aircraft_mesh};
 
 /// Pick ids of a layer made with [`TrafficLayer::new`] start here (clear of a
@@ -52,6 +60,10 @@ const GROUND_REFRESH_DEG: f64 = 0.002;
 /// How much nearer than its depth the terrain may be at a symbol's centre before the symbol
 /// is hidden (fraction of the depth).
 const SYMBOL_TOLERANCE: f32 = 1.0e-4;
+/// Length of a drawn trail segment, pixels: far trails skip points down to this.
+const TRAIL_SEGMENT_PX: f64 = 4.0;
+/// Room round a label's text, pixels.
+const LABEL_PAD_PX: f32 = 2.0;
 /// Light on faces turned away from the sun.
 const AMBIENT: f32 = 0.35;
 
@@ -67,6 +79,12 @@ pub struct TrafficStyle {
     pub trails: bool,
     /// Draw models close in (symbols only otherwise).
     pub models: bool,
+    /// Draw data-block labels (decluttered: never overlapping).
+    pub labels: bool,
+    /// Label text size: pixels from one line to the next.
+    pub label_px: f32,
+    /// How long a label takes to fade in or out, seconds.
+    pub label_fade_s: f32,
 }
 
 impl Default for TrafficStyle {
@@ -76,6 +94,9 @@ impl Default for TrafficStyle {
             trail_width_px: 2.0,
             trails: true,
             models: true,
+            labels: true,
+            label_px: 13.0,
+            label_fade_s: 0.3,
         }
     }
 }
@@ -95,6 +116,14 @@ pub struct TrafficStats {
     pub trail_points_encoded: u32,
     /// Trail points uploaded in the last frame.
     pub trail_points_uploaded: u32,
+    /// Trail segments drawn (at most) in the last frame.
+    pub trail_segments: u32,
+    /// Labels drawn in the last frame (fading ones included).
+    pub labels: u32,
+    /// Labels asked for (aircraft on screen) in the last frame.
+    pub labels_wanted: u32,
+    /// CPU seconds the last frame's label placement took.
+    pub label_placement_s: f64,
     /// Ground heights looked up in the last frame.
     pub ground_queries: u32,
     /// CPU seconds of the last frame's prepare (sampling, placing, uploads).
@@ -148,10 +177,33 @@ pub struct TrafficLayer {
     built_for: Option<(Ellipsoid, f64)>,
     writes: Vec<u32>,
     instances: [Vec<u32>; 4],
+    /// Slots whose trails are drawn, by bucket, with the most segments one needs.
+    trail_lists: [(Vec<u32>, u32); 3],
     gpu: Option<Gpu>,
     stats: TrafficStats,
     frame: u64,
     selected: Option<u64>,
+    labels: Labels,
+}
+
+/// The label side of the layer: the atlas, the placer and this frame's labels.
+#[derive(Default)]
+struct Labels {
+    /// Made on the first frame that draws labels (`None` before, or when the font failed).
+    atlas: Option<GlyphAtlas>,
+    failed: bool,
+    placer: Option<LabelPlacer>,
+    /// Per slot: its data block laid out.
+    blocks: Vec<LaidOut>,
+    requests: Vec<LabelRequest>,
+    /// Per request: slot, and the aircraft's depth on screen.
+    request_slots: Vec<(u32, f32)>,
+    /// Symbols on screen: labels keep off them.
+    symbols: Vec<[f32; 4]>,
+    placed: Vec<PlacedLabel>,
+    rows: Vec<LabelGpu>,
+    glyphs: Vec<GlyphInstance>,
+    last_prepare: Option<Instant>,
 }
 
 impl Default for TrafficLayer {
@@ -196,10 +248,12 @@ impl TrafficLayer {
             built_for: None,
             writes: Vec::new(),
             instances: Default::default(),
+            trail_lists: Default::default(),
             gpu: None,
             stats: TrafficStats::default(),
             frame: 0,
             selected: None,
+            labels: Labels::default(),
         }
     }
 
@@ -321,7 +375,8 @@ impl TrafficLayer {
         let moved = (s.ground_at[0] - lon_deg)
             .abs()
             .max((s.ground_at[1] - lat_deg).abs());
-        let stale = moved.is_nan() || moved > GROUND_REFRESH_DEG || self.frame - s.ground_frame > 60;
+        let stale =
+            moved.is_nan() || moved > GROUND_REFRESH_DEG || self.frame - s.ground_frame > 60;
         if stale && (s.ground_m.is_nan() || self.stats.ground_queries < GROUND_QUERIES_PER_FRAME) {
             s.ground_m = frame.ground_height_m(lon_deg.to_radians(), lat_deg.to_radians());
             s.ground_at = [lon_deg, lat_deg];
@@ -409,16 +464,17 @@ impl TrafficLayer {
         encoded
     }
 
-    /// One row per slot for this frame, and the model instances.
-    fn place_aircraft(&mut self, frame: &FrameContext<'_>) {
+    /// One row per slot for this frame, the model instances and the trails to draw.
+    fn place_aircraft(&mut self, frame: &FrameContext<'_>, epoch: f64) {
         let camera = frame.camera();
-        let view = camera.view();
-        let eye = camera.origin();
-        let forward = view.forward();
-        let (_, h) = camera.viewport_px();
-        let focal_px = f64::from(h) / (2.0 * (view.fov_y_rad * 0.5).tan());
+        let view = *camera.view();
+        let cone = ViewCone::of(&view);
+        let focal_px = view.height_px as f64 / (2.0 * (view.fov_y_rad * 0.5).tan());
         let ellipsoid = *frame.ellipsoid();
         let capacity = self.fleet.slot_capacity();
+        let n = self.fleet.options().trail_points;
+        let now = (self.time_s - epoch) as f32;
+        let trail_s = self.fleet.options().trail_s as f32;
         self.rows.clear();
         self.rows.resize(capacity, AircraftGpu::default());
         self.drawn_at.clear();
@@ -426,6 +482,16 @@ impl TrafficLayer {
         for list in &mut self.instances {
             list.clear();
         }
+        for (list, segments) in &mut self.trail_lists {
+            list.clear();
+            *segments = 0;
+        }
+        let labels_on = self.style.labels && self.labels.atlas.is_some();
+        self.labels.requests.clear();
+        self.labels.request_slots.clear();
+        self.labels.symbols.clear();
+        self.labels.blocks.resize_with(capacity, LaidOut::default);
+        let occluder = EllipsoidalOccluder::new(&ellipsoid, view.position);
         let sampled = std::mem::take(&mut self.sampled);
         for r in 0..sampled.len() {
             let slot = sampled.slots[r] as usize;
@@ -437,12 +503,7 @@ impl TrafficLayer {
                 alt_m = if on_ground { ground } else { alt.max(ground) };
             }
             let world = frame.world_position(Cartographic::from_degrees(lon, lat, alt_m));
-            let enu = ellipsoid.enu_frame(lon.to_radians(), lat.to_radians());
-            let [heading, pitch, _roll] =
-                sampled.attitudes_deg[r].map(|a| f64::from(a).to_radians());
-            let horizontal = enu.north * heading.cos() + enu.east * heading.sin();
-            let nose = horizontal * pitch.cos() + enu.up * pitch.sin();
-            let up = enu.up * pitch.cos() - horizontal * pitch.sin();
+            let normal = ellipsoid.geodetic_normal(world).unwrap_or(DVec3::Z);
             let kind = usize::from(sampled.kinds[r] & 3);
             let f = sampled.flags[r];
             let mut b = bits::LIVE | ((kind as u32) << bits::KIND_SHIFT);
@@ -457,29 +518,236 @@ impl TrafficLayer {
             let anchor = self.slots[slot]
                 .anchor
                 .map_or(position, |a| camera.relative(a));
+            let [heading, pitch, _roll] = sampled.attitudes_deg[r];
+            let extent = f64::from(self.extents_m[kind]);
+            let distance = (world - view.position).length().max(1e-3);
+            let trail = self.trail_to_draw(slot, head, len, now, trail_s);
+            let trail_reach = f64::from(trail.span_m) + extent;
+            let mut trail_bits = 0;
+            if self.style.trails && trail.past > 0 && cone.sees(world, trail_reach) {
+                // Segments a few pixels long: far trails skip points.
+                let on_screen_px = f64::from(trail.span_m) * focal_px / distance;
+                let wanted = (on_screen_px / TRAIL_SEGMENT_PX).ceil().max(1.0);
+                let points = f64::from(trail.past - trail.first_visible);
+                let stride = (points / wanted).ceil().clamp(1.0, f64::from(n as u32)) as u32;
+                let segments = 2 + (trail.past - 1 - trail.first_visible) / stride;
+                trail_bits = trail.past | (stride << 16);
+                let bucket = TRAIL_BUCKETS
+                    .iter()
+                    .position(|&cap| segments <= cap)
+                    .unwrap_or(TRAIL_BUCKETS.len() - 1);
+                let (list, most) = &mut self.trail_lists[bucket];
+                list.push(slot as u32);
+                *most = (*most).max(segments);
+            }
             self.rows[slot] = AircraftGpu {
                 position: position.to_array(),
                 colour: u32::from_le_bytes(sampled.colours[r]),
-                forward: nose.as_vec3().to_array(),
+                normal: normal.as_vec3().to_array(),
                 bits: b,
-                up: up.as_vec3().to_array(),
-                ring: (head & 0xffff) | (len.min(0xffff) << 16),
                 anchor: anchor.to_array(),
+                ring: (head & 0xffff) | (len.min(0xffff) << 16),
+                heading_rad: heading.to_radians(),
+                pitch_rad: pitch.to_radians(),
+                trail: trail_bits,
                 spare: 0,
             };
             self.drawn_at[slot] = world;
+            if labels_on
+                && occluder.is_point_visible(world)
+                && let Some((px, depth)) = camera.project_with_depth(world)
+                && px.x >= 0.0
+                && px.y >= 0.0
+                && px.x <= f64::from(view.width_px)
+                && px.y <= f64::from(view.height_px)
+            {
+                let selected = f & flags::SELECTED != 0;
+                let content = BlockContent::new(
+                    sampled.ids[r],
+                    sampled.callsigns[r],
+                    alt_m,
+                    on_ground,
+                    sampled.speeds[r],
+                    selected,
+                );
+                if let Some(atlas) = &self.labels.atlas {
+                    self.labels.blocks[slot].update(atlas, &content, self.style.label_px);
+                }
+                let [w, h] = self.labels.blocks[slot].size;
+                let half = self.style.symbol_px[kind] * 0.5;
+                let (x, y) = (px.x as f32, px.y as f32);
+                self.labels
+                    .symbols
+                    .push([x - half, y - half, x + half, y + half]);
+                self.labels.requests.push(LabelRequest {
+                    id: sampled.ids[r],
+                    anchor_px: [px.x as f32, px.y as f32],
+                    clearance_px: self.style.symbol_px[kind] * 0.5 + 4.0,
+                    size_px: [w + 2.0 * LABEL_PAD_PX, h + 2.0 * LABEL_PAD_PX],
+                    // Selected first, then by size on screen: nearer, then larger.
+                    priority: if selected {
+                        f32::MAX
+                    } else {
+                        (extent / distance) as f32
+                    },
+                });
+                self.labels.request_slots.push((slot as u32, depth as f32));
+            }
             if self.style.models {
-                let offset = world - eye;
-                let distance = offset.length().max(1e-3);
-                let true_px = f64::from(self.extents_m[kind]) * focal_px / distance;
-                let in_front = offset.dot(forward) > -f64::from(self.extents_m[kind]) * 2.0;
-                if in_front && true_px >= 0.75 * f64::from(self.style.symbol_px[kind]) {
+                let true_px = extent * focal_px / distance;
+                if true_px >= 0.75 * f64::from(self.style.symbol_px[kind])
+                    && cone.sees(world, extent * 2.0)
+                {
                     self.instances[kind].push(slot as u32);
                 }
             }
         }
         self.sampled = sampled;
     }
+
+    /// Places this frame's labels and builds what the GPU draws of them.
+    fn place_labels(&mut self, viewport: [f32; 2]) {
+        let started = Instant::now();
+        let now = Instant::now();
+        // The first frame shows its labels at once (a still picture must not be caught
+        // mid-fade); later ones fade by the time between frames.
+        let dt = self
+            .labels
+            .last_prepare
+            .replace(now)
+            .map_or(f32::INFINITY, |t| (now - t).as_secs_f32());
+        let fade = self.style.label_fade_s;
+        let l = &mut self.labels;
+        let placer = l.placer.get_or_insert_with(|| LabelPlacer::new(fade));
+        placer.place(&l.requests, &l.symbols, viewport, dt, &mut l.placed);
+        l.rows.clear();
+        l.glyphs.clear();
+        for p in &l.placed {
+            let (slot, depth) = l.request_slots[p.request];
+            let block = &l.blocks[slot as usize];
+            let r = &l.requests[p.request];
+            let row = self.rows[slot as usize];
+            let index = l.rows.len() as u32;
+            l.rows.push(LabelGpu {
+                anchor: r.anchor_px,
+                depth,
+                opacity: p.opacity,
+                origin: [p.bounds[0], p.bounds[1]],
+                size: [p.bounds[2] - p.bounds[0], p.bounds[3] - p.bounds[1]],
+                colour: label_colour(row.colour, row.bits & bits::SELECTED != 0),
+                clearance: r.clearance_px,
+                spare: [0.0; 2],
+            });
+            l.glyphs
+                .extend(block.glyphs.iter().map(|&(g, [x, y])| GlyphInstance {
+                    label: index,
+                    glyph: u32::from(g),
+                    at: [x + LABEL_PAD_PX, y + LABEL_PAD_PX],
+                }));
+        }
+        self.stats.labels = l.placed.len() as u32;
+        self.stats.labels_wanted = l.requests.len() as u32;
+        self.stats.label_placement_s = started.elapsed().as_secs_f64();
+    }
+
+    /// The labels drawn in the last frame: each one's aircraft and its box on screen (min x,
+    /// min y, max x, max y, pixels), and its opacity.
+    pub fn drawn_labels(&self) -> impl Iterator<Item = (u64, [f32; 4], f32)> + '_ {
+        self.labels
+            .placed
+            .iter()
+            .map(|p| (p.id, p.bounds, p.opacity))
+    }
+
+    /// Which of a slot's trail points are drawn now: those older than now (the newest may be
+    /// a report ahead of the clock), from the first younger than the trail's age.
+    fn trail_to_draw(&self, slot: usize, head: u32, len: u32, now: f32, trail_s: f32) -> TrailSpan {
+        let n = self.fleet.options().trail_points;
+        let (head, len) = (head as usize, len as usize);
+        let at = |k: usize| self.trail_encoded[slot * n + (head + n - len + k) % n];
+        let mut past = len;
+        while past > 0 && at(past - 1)[3] >= now {
+            past -= 1;
+        }
+        if past == 0 {
+            return TrailSpan::default();
+        }
+        // Ring points are in time order: the first young enough, by bisection.
+        let (mut lo, mut hi) = (0usize, past - 1);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if now - at(mid)[3] > trail_s {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        let (a, b) = (at(lo), at(past - 1));
+        let span_m = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+        TrailSpan {
+            past: past as u32,
+            first_visible: lo as u32,
+            span_m,
+        }
+    }
+}
+
+/// The part of a trail drawn this frame.
+#[derive(Clone, Copy, Debug, Default)]
+struct TrailSpan {
+    /// Points older than now.
+    past: u32,
+    /// The oldest of them younger than the trail's age.
+    first_visible: u32,
+    /// Straight distance from it to the newest past point, metres.
+    span_m: f32,
+}
+
+/// A cone round the view direction holding the whole frustum: a cheap "may be on screen"
+/// for spheres.
+struct ViewCone {
+    eye: DVec3,
+    forward: DVec3,
+    cos_half: f64,
+}
+
+impl ViewCone {
+    fn of(view: &globus_geo::View) -> Self {
+        let tan_y = (view.fov_y_rad * 0.5).tan();
+        let tan_diag = tan_y * (1.0 + view.aspect() * view.aspect()).sqrt();
+        Self {
+            eye: view.position,
+            forward: view.forward(),
+            cos_half: tan_diag.atan().cos(),
+        }
+    }
+
+    /// Whether a sphere may be in view.
+    fn sees(&self, centre: DVec3, radius: f64) -> bool {
+        let v = centre - self.eye;
+        let d = v.length();
+        if d <= radius {
+            return true;
+        }
+        // The angle off the axis less the sphere's angular radius r is within the cone's half
+        // angle: cos(angle - r) >= cos(half), or the axis passes through the sphere.
+        let along = v.dot(self.forward) / d;
+        let across = (1.0 - along * along).max(0.0).sqrt();
+        let sr = radius / d;
+        let cr = (1.0 - sr * sr).sqrt();
+        along >= cr || along * cr + across * sr >= self.cos_half
+    }
+}
+
+/// A label's text colour: its aircraft's, lifted towards white so it reads over a dark halo;
+/// the selection's yellow when selected.
+fn label_colour(colour: u32, selected: bool) -> u32 {
+    if selected {
+        return u32::from_le_bytes([255, 230, 60, 255]);
+    }
+    let c = colour.to_le_bytes();
+    let lift = |v: u8| ((u16::from(v) + 255) / 2) as u8;
+    u32::from_le_bytes([lift(c[0]), lift(c[1]), lift(c[2]), 255])
 }
 
 fn encode(offset: DVec3, time_s: f64) -> [f32; 4] {
@@ -517,14 +785,33 @@ impl Overlay for TrafficLayer {
                 self.time_s
             }
         };
+        if self.style.labels && self.labels.atlas.is_none() && !self.labels.failed {
+            match GlyphAtlas::new() {
+                Ok(a) => self.labels.atlas = Some(a),
+                Err(e) => {
+                    tracing::warn!("traffic labels are off: {e}");
+                    self.labels.failed = true;
+                }
+            }
+        }
         self.fleet.sample(self.time_s, &mut self.sampled);
         let capacity = self.fleet.slot_capacity();
         self.slots.resize(capacity, SlotState::default());
         self.stats.trail_points_encoded = self.encode_trails(frame, epoch);
-        self.place_aircraft(frame);
+        self.place_aircraft(frame, epoch);
 
+        let (vw, vh) = frame.camera().viewport_px();
+        self.place_labels([vw as f32, vh as f32]);
         if self.gpu.is_none() {
-            self.gpu = Some(Gpu::new(frame, &self.meshes));
+            let fallback;
+            let atlas = match &self.labels.atlas {
+                Some(a) => a,
+                None => {
+                    fallback = GlyphAtlas::empty();
+                    &fallback
+                }
+            };
+            self.gpu = Some(Gpu::new(frame, &self.meshes, atlas));
             self.upload_all = true;
         }
         let Some(gpu) = self.gpu.as_mut() else {
@@ -584,11 +871,32 @@ impl Overlay for TrafficLayer {
             ],
             kinds,
         };
-        let trails = if self.style.trails { n as u32 } else { 0 };
-        gpu.write_frame(frame, &uniforms, &self.rows, &self.instances, trails);
+        gpu.write_frame(
+            frame,
+            &uniforms,
+            &self.rows,
+            &self.instances,
+            &self.trail_lists,
+        );
+        if let Some(atlas) = &self.labels.atlas {
+            let scale = self.style.label_px / atlas.line_height;
+            // A halo 1.5 pixels wide, in the field's units (255ths per SPREAD_PX atlas pixels).
+            let halo = 1.5 / scale * 127.0 / (255.0 * crate::text::SPREAD_PX);
+            let style = LabelStyle {
+                scale: [scale, atlas.size[0] as f32, atlas.size[1] as f32, halo],
+            };
+            gpu.write_labels(frame, &style, &self.labels.rows, &self.labels.glyphs);
+        }
         let model_draws = self.instances.iter().filter(|l| !l.is_empty()).count() as u32;
-        let any = u32::from(!self.rows.is_empty());
-        self.stats.draw_calls = any * (1 + u32::from(self.style.trails)) + model_draws;
+        let trail_draws = self.trail_lists.iter().filter(|l| !l.0.is_empty()).count() as u32;
+        let label_draws = 2 * u32::from(!self.labels.rows.is_empty());
+        self.stats.draw_calls =
+            u32::from(!self.rows.is_empty()) + model_draws + trail_draws + label_draws;
+        self.stats.trail_segments = self
+            .trail_lists
+            .iter()
+            .map(|(l, s)| l.len() as u32 * s)
+            .sum();
         self.stats.models = self.instances.iter().map(|l| l.len() as u32).sum();
         self.stats.gpu_bytes = gpu.gpu_bytes();
         self.stats.trail_points_uploaded = uploaded as u32;
@@ -606,7 +914,7 @@ impl Overlay for TrafficLayer {
         };
         match pass {
             OverlayPass::World => {
-                gpu.draw_world(render_pass, self.style.trails);
+                gpu.draw_world(render_pass);
             }
             OverlayPass::ScreenAligned => {
                 gpu.draw_symbols(render_pass);

@@ -23,13 +23,40 @@ struct Frame {
 struct Aircraft {
     position: vec3<f32>,
     colour: u32,
-    forward: vec3<f32>,
+    // The geodetic normal at the aircraft (its local vertical).
+    normal: vec3<f32>,
     bits: u32,
-    up: vec3<f32>,
+    anchor: vec3<f32>,
     // Ring head (low 16 bits) and length (high 16 bits).
     ring: u32,
-    anchor: vec3<f32>,
+    // Heading (clockwise from north) and pitch, radians.
+    heading: f32,
+    pitch: f32,
+    // Trail points older than now (low 16 bits), and the stride drawn (high 16).
+    trail: u32,
     spare: u32,
+}
+
+// Nose and up of an airframe from its local vertical, heading and pitch (directions only:
+// f32 is plenty).
+struct Attitude {
+    forward: vec3<f32>,
+    up: vec3<f32>,
+}
+
+fn attitude(a: Aircraft) -> Attitude {
+    let n = a.normal;
+    var east = cross(vec3<f32>(0.0, 0.0, 1.0), n);
+    if (length(east) < 1e-6) {
+        // At a pole: east of longitude 0.
+        east = vec3<f32>(0.0, 1.0, 0.0);
+    }
+    east = normalize(east);
+    let north = cross(n, east);
+    let horizontal = north * cos(a.heading) + east * sin(a.heading);
+    let forward = horizontal * cos(a.pitch) + n * sin(a.pitch);
+    let up = n * cos(a.pitch) - horizontal * sin(a.pitch);
+    return Attitude(forward, up);
 }
 
 const LIVE: u32 = 1u;
@@ -96,33 +123,39 @@ struct TrailOut {
 // Eye-space depth below which a segment end is moved along it (in front of the camera).
 const NEAR_W: f32 = 1e-3;
 
+fn ring_point(slot: u32, a: Aircraft, k: u32) -> vec4<f32> {
+    let n = frame.counts.x;
+    let len = a.ring >> 16u;
+    let head = a.ring & 0xffffu;
+    return trail_points[slot * n + (head + n - len + k) % n];
+}
+
+// Segment `m` of a trail, newest first: 0 joins the aircraft to its newest past point, each
+// next one goes `stride` points further back (the CPU picks the stride so segments stay a
+// few pixels long).
 @vertex
-fn trail_vs(@builtin(vertex_index) vi: u32) -> TrailOut {
+fn trail_vs(@builtin(vertex_index) vi: u32, @location(0) slot: u32) -> TrailOut {
     var out: TrailOut;
     out.clip = OFF;
-    let n = frame.counts.x;
-    let segment = vi / 6u;
+    let m = i32(vi / 6u);
     let corner = vi % 6u;
-    let slot = segment / n;
-    let j = segment % n;
     let a = aircraft[slot];
-    let len = a.ring >> 16u;
-    if ((a.bits & LIVE) == 0u || j >= len) {
+    let past = i32(a.trail & 0xffffu);
+    let stride = max(i32(a.trail >> 16u), 1);
+    if ((a.bits & LIVE) == 0u || past == 0) {
         return out;
     }
-    let head = a.ring & 0xffffu;
     let now = frame.params.y;
-    let pa = trail_points[slot * n + (head + n - len + j) % n];
-    if (pa.w >= now) {
-        return out;
-    }
+    let newest = past - 1;
     var pb = vec4<f32>(a.position - a.anchor, now);
-    if (j + 1u < len) {
-        let next = trail_points[slot * n + (head + n - len + j + 1u) % n];
-        if (next.w < now) {
-            pb = next;
+    if (m > 0) {
+        let k = newest - (m - 1) * stride;
+        if (k <= 0) {
+            return out;
         }
+        pb = ring_point(slot, a, u32(k));
     }
+    let pa = ring_point(slot, a, u32(max(newest - m * stride, 0)));
     let age_a = now - pa.w;
     let age_b = now - pb.w;
     if (age_b > frame.params.z) {
@@ -177,8 +210,9 @@ fn trail_vs(@builtin(vertex_index) vi: u32) -> TrailOut {
 @fragment
 fn trail_fs(in: TrailOut) -> @location(0) vec4<f32> {
     let coverage = clamp(in.half_width + 0.5 - abs(in.across_px), 0.0, 1.0);
+    // Full near the aircraft, nothing at the trail's age.
     let fade = clamp(1.0 - in.age_s / frame.params.z, 0.0, 1.0);
-    let a = in.colour.a * coverage * (0.15 + 0.75 * fade);
+    let a = in.colour.a * coverage * 0.9 * sqrt(fade);
     if (a <= 0.004) {
         discard;
     }
@@ -216,10 +250,11 @@ fn model_vs(v: ModelIn) -> ModelOut {
     }
     // Never smaller than the symbol it replaces.
     let scale = max(1.0, n / max(size, 1e-3));
-    let left = cross(a.up, a.forward);
-    let offset = (a.forward * v.position.x + left * v.position.y + a.up * v.position.z) * scale;
+    let att = attitude(a);
+    let left = cross(att.up, att.forward);
+    let offset = (att.forward * v.position.x + left * v.position.y + att.up * v.position.z) * scale;
     out.clip = frame.clip_from_eye * vec4<f32>(a.position + offset, 1.0);
-    out.normal = a.forward * v.normal.x + left * v.normal.y + a.up * v.normal.z;
+    out.normal = att.forward * v.normal.x + left * v.normal.y + att.up * v.normal.z;
     // White airframes; fin and nacelles in the aircraft's colour (as its symbol and trail).
     var base = select(vec3<f32>(0.8, 0.82, 0.85), linear(a.colour).rgb, v.accent != 0u);
     if ((a.bits & SELECTED) != 0u) {
@@ -227,7 +262,7 @@ fn model_vs(v: ModelIn) -> ModelOut {
     }
     out.colour = vec4<f32>(base, 1.0);
     out.id = frame.counts.y + v.slot;
-    out.up = a.up;
+    out.up = att.up;
     out.view = a.position + offset;
     return out;
 }
@@ -284,7 +319,8 @@ fn symbol_vs(@builtin(vertex_index) vi: u32) -> SymbolOut {
     }
     let centre = to_pixels(c);
     // The heading on screen: where a point a little ahead lands.
-    let ahead = frame.clip_from_eye * vec4<f32>(a.position + a.forward * max(length(a.position) * 0.01, 1.0), 1.0);
+    let forward = attitude(a).forward;
+    let ahead = frame.clip_from_eye * vec4<f32>(a.position + forward * max(length(a.position) * 0.01, 1.0), 1.0);
     var along = vec2<f32>(0.0, -1.0);
     if (ahead.w > NEAR_W) {
         let d = to_pixels(ahead) - centre;
@@ -387,4 +423,157 @@ fn symbol_fs(in: SymbolOut) -> Target {
         discard;
     }
     return Target(colour, in.id);
+}
+
+// ---- data-block labels ----
+
+// A placed label (mirrors `LabelGpu`, 48 bytes).
+struct Label {
+    // The aircraft on screen (pixels), its depth, and the label's opacity.
+    anchor: vec2<f32>,
+    depth: f32,
+    opacity: f32,
+    // The box's top-left and size (pixels).
+    origin: vec2<f32>,
+    size: vec2<f32>,
+    // Text colour (sRGB), and how far from the anchor the leader starts (pixels).
+    colour: u32,
+    clearance: f32,
+    spare: vec2<f32>,
+}
+
+// One glyph of the atlas (mirrors `GlyphGpu`): its texels, and where the quad lies from the
+// pen (atlas pixels).
+struct AtlasGlyph {
+    rect: vec4<f32>,
+    offset: vec2<f32>,
+    spare: vec2<f32>,
+}
+
+// One glyph drawn (mirrors `GlyphInstance`).
+struct GlyphInstance {
+    label: u32,
+    glyph: u32,
+    // Top-left of the quad from the label's origin, pixels.
+    at: vec2<f32>,
+}
+
+struct LabelStyle {
+    // x: pixels per atlas pixel, y: atlas width, z: atlas height, w: halo width in field
+    // units.
+    scale: vec4<f32>,
+}
+
+@group(0) @binding(4) var atlas: texture_2d<f32>;
+@group(0) @binding(5) var atlas_sampler: sampler;
+@group(0) @binding(6) var<storage, read> atlas_glyphs: array<AtlasGlyph>;
+@group(0) @binding(7) var<storage, read> labels: array<Label>;
+@group(0) @binding(8) var<storage, read> glyphs: array<GlyphInstance>;
+@group(0) @binding(9) var<uniform> label_style: LabelStyle;
+
+// Whether the terrain hides the aircraft a label belongs to (the symbol's test, in the
+// vertex stage: a hidden aircraft's whole label goes).
+fn label_hidden(l: Label) -> bool {
+    let q = vec2<i32>(floor(l.anchor - vec2<f32>(0.5)));
+    let nearest_far = min(
+        min(terrain_at(q), terrain_at(q + vec2<i32>(1, 0))),
+        min(terrain_at(q + vec2<i32>(0, 1)), terrain_at(q + vec2<i32>(1, 1))),
+    );
+    return nearest_far > l.depth * (1.0 + frame.params.w);
+}
+
+fn pixels_to_clip(px: vec2<f32>) -> vec4<f32> {
+    return vec4<f32>(px.x * frame.viewport.z * 2.0 - 1.0, 1.0 - px.y * frame.viewport.w * 2.0, 0.0, 1.0);
+}
+
+struct LeaderOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) across_px: f32,
+    @location(1) @interpolate(flat) colour: vec4<f32>,
+}
+
+// A thin line from the edge of the symbol to the label's nearest corner.
+@vertex
+fn leader_vs(@builtin(vertex_index) vi: u32) -> LeaderOut {
+    var out: LeaderOut;
+    out.clip = OFF;
+    let l = labels[vi / 6u];
+    if (label_hidden(l)) {
+        return out;
+    }
+    let corner = vec2<f32>(
+        select(l.origin.x, l.origin.x + l.size.x, l.anchor.x > l.origin.x + l.size.x * 0.5),
+        select(l.origin.y, l.origin.y + l.size.y, l.anchor.y > l.origin.y + l.size.y * 0.5),
+    );
+    var dir = corner - l.anchor;
+    let len = length(dir);
+    if (len <= l.clearance) {
+        return out;
+    }
+    dir = dir / len;
+    let a = l.anchor + dir * l.clearance * 0.75;
+    let perp = vec2<f32>(-dir.y, dir.x);
+    let ends = array<u32, 6>(0u, 0u, 1u, 1u, 0u, 1u);
+    let sides = array<f32, 6>(-1.0, 1.0, -1.0, -1.0, 1.0, 1.0);
+    let c = vi % 6u;
+    let p = select(a, corner, ends[c] == 1u) + perp * sides[c] * 1.5;
+    out.clip = pixels_to_clip(p);
+    out.across_px = sides[c] * 1.5;
+    out.colour = label_colour(l);
+    return out;
+}
+
+@fragment
+fn leader_fs(in: LeaderOut) -> @location(0) vec4<f32> {
+    let coverage = clamp(1.0 - abs(in.across_px), 0.0, 1.0);
+    return vec4<f32>(in.colour.rgb, in.colour.a * coverage * 0.8);
+}
+
+fn label_colour(l: Label) -> vec4<f32> {
+    let c = linear(l.colour);
+    return vec4<f32>(c.rgb, l.opacity);
+}
+
+struct GlyphOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) @interpolate(flat) colour: vec4<f32>,
+}
+
+@vertex
+fn glyph_vs(@builtin(vertex_index) vi: u32) -> GlyphOut {
+    var out: GlyphOut;
+    out.clip = OFF;
+    let g = glyphs[vi / 6u];
+    let l = labels[g.label];
+    if (label_hidden(l)) {
+        return out;
+    }
+    let a = atlas_glyphs[g.glyph];
+    let xs = array<f32, 6>(0.0, 1.0, 0.0, 0.0, 1.0, 1.0);
+    let ys = array<f32, 6>(0.0, 0.0, 1.0, 1.0, 0.0, 1.0);
+    let corner = vec2<f32>(xs[vi % 6u], ys[vi % 6u]);
+    let size = a.rect.zw * label_style.scale.x;
+    let p = l.origin + g.at + corner * size;
+    out.clip = pixels_to_clip(p);
+    out.uv = (a.rect.xy + corner * a.rect.zw) / label_style.scale.yz;
+    out.colour = label_colour(l);
+    return out;
+}
+
+@fragment
+fn glyph_fs(in: GlyphOut) -> @location(0) vec4<f32> {
+    let d = textureSample(atlas, atlas_sampler, in.uv).r;
+    let edge = 128.0 / 255.0;
+    let aa = max(fwidth(d) * 0.75, 1e-4);
+    let ink = smoothstep(edge - aa, edge + aa, d);
+    let halo_edge = edge - label_style.scale.w;
+    let halo = smoothstep(halo_edge - aa, halo_edge + aa, d);
+    // Text over a dark halo: readable on bright snow and dark sea alike.
+    let rgb = mix(vec3<f32>(0.0, 0.0, 0.0), in.colour.rgb, ink);
+    let a = max(ink, halo * 0.75) * in.colour.a;
+    if (a < 0.01) {
+        discard;
+    }
+    return vec4<f32>(rgb, a);
 }
