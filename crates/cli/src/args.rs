@@ -173,6 +173,11 @@ pub struct TrafficSceneArgs {
     /// record's first moment).
     #[arg(long, requires = "traffic")]
     pub time: Option<String>,
+    /// Draw one kind of aircraft with a glTF 2.0 binary model: KIND=FILE.glb, KIND one of
+    /// light, narrowbody, widebody, helicopter (metres, +Y up, +Z forward; materials named
+    /// "accent" take the aircraft's colour). Repeatable.
+    #[arg(long = "model", requires = "traffic")]
+    pub models: Vec<String>,
 }
 
 #[derive(Args)]
@@ -205,6 +210,10 @@ pub struct BenchArgs {
     /// aircraft).
     #[arg(long, allow_hyphen_values = true, requires = "traffic")]
     pub camera: Option<String>,
+    /// Traffic benchmark: a glTF model for a kind, KIND=FILE.glb (see `globus render
+    /// --help`). Repeatable.
+    #[arg(long = "model", requires = "traffic")]
+    pub models: Vec<String>,
     /// Soak test: fly between random views for this many seconds in real time, printing one
     /// JSON line per second (resident memory, cache bytes, GPU tiles, loads, failures).
     #[arg(long, conflicts_with_all = ["from", "to"])]

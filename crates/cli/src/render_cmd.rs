@@ -34,11 +34,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     let mut vectors = args::vector_layer(&a.globe)?;
     let mut traffic = match &a.traffic.traffic {
-        Some(path) => Some(crate::traffic_cmd::scene(
-            path,
-            a.traffic.time.as_deref(),
-            None,
-        )?),
+        Some(path) => {
+            let mut scene = crate::traffic_cmd::scene(path, a.traffic.time.as_deref(), None)?;
+            crate::traffic_cmd::apply_models(&mut scene.layer, &a.traffic.models)?;
+            Some(scene)
+        }
         None => None,
     };
     let mut off = Headless::new(&builder, width, height)?;

@@ -56,6 +56,10 @@ pub struct TrafficViewArgs {
     /// Close the window after this many seconds (for automated checks).
     #[arg(long)]
     pub exit_after: Option<f64>,
+    /// Draw one kind with a glTF 2.0 binary model: KIND=FILE.glb, KIND one of light,
+    /// narrowbody, widebody, helicopter. Repeatable.
+    #[arg(long = "model")]
+    pub models: Vec<String>,
 }
 
 /// The fastest replay, seconds of record per second.
@@ -158,6 +162,54 @@ pub fn stats_json(s: &TrafficStats) -> serde_json::Value {
     })
 }
 
+/// The name of a kind on the command line.
+fn kind_name(kind: AircraftKind) -> &'static str {
+    match kind {
+        AircraftKind::Light => "light",
+        AircraftKind::NarrowBody => "narrowbody",
+        AircraftKind::WideBody => "widebody",
+        AircraftKind::Helicopter => "helicopter",
+    }
+}
+
+/// Gives `layer` the models of `--model KIND=FILE.glb` arguments.
+pub fn apply_models(layer: &mut TrafficLayer, specs: &[String]) -> anyhow::Result<()> {
+    for spec in specs {
+        let Some((kind, file)) = spec.split_once('=') else {
+            bail!("--model {spec:?} must be KIND=FILE.glb");
+        };
+        let kind = AircraftKind::ALL
+            .into_iter()
+            .find(|&k| kind_name(k) == kind.trim().to_ascii_lowercase().replace('-', ""))
+            .with_context(|| {
+                format!(
+                    "--model {spec:?}: the kind must be one of light, narrowbody, widebody, helicopter"
+                )
+            })?;
+        let mesh = globus_engine::traffic::read_glb(Path::new(file))?;
+        tracing::info!(
+            "{file}: {} triangles for {}",
+            mesh.triangles(),
+            kind_name(kind)
+        );
+        layer.set_model(kind, mesh);
+    }
+    Ok(())
+}
+
+fn write_models(out: &Path) -> anyhow::Result<String> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot make {}", out.display()))?;
+    let mut written = Vec::new();
+    for kind in AircraftKind::ALL {
+        let path = out.join(format!("{}.glb", kind_name(kind)));
+        let bytes = globus_engine::traffic::write_glb(&globus_engine::traffic::aircraft_mesh(kind));
+        globus_tiling::files::write_atomic(&path, &bytes)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        written.push(path.display().to_string());
+    }
+    Ok(json!({ "models": written }).to_string())
+}
+
 /// `globus traffic --record FILE`: the viewer on a replay.
 pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
     let Some(record) = &a.record else {
@@ -177,7 +229,8 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
     let globe = args::globe_builder(&a.globe)?;
     let vectors = args::vector_layer(&a.globe)?;
-    let scene = scene(record, a.start.as_deref(), None)?;
+    let mut scene = scene(record, a.start.as_deref(), None)?;
+    apply_models(&mut scene.layer, &a.models)?;
     let camera = match &a.camera {
         Some(c) => args::parse_camera(c, a.above_ground)?,
         None => default_camera(&scene.replay),
@@ -204,6 +257,13 @@ pub enum TrafficCommand {
     Info {
         /// The record: OpenSky state-vector CSV, plain or gzip.
         record: PathBuf,
+    },
+    /// Write the built-in aircraft shapes as glTF 2.0 binary files (light.glb,
+    /// narrowbody.glb, widebody.glb, helicopter.glb), to change and give back with --model.
+    Models {
+        /// The folder to write them in (made if missing).
+        #[arg(long)]
+        out: PathBuf,
     },
 }
 
@@ -241,6 +301,7 @@ pub fn run(command: TrafficCommand) -> anyhow::Result<String> {
     match command {
         TrafficCommand::Synth(a) => synth_cmd(&a),
         TrafficCommand::Info { record } => info(&record),
+        TrafficCommand::Models { out } => write_models(&out),
     }
 }
 

@@ -57,8 +57,8 @@ pub struct ViewerTraffic {
     scene: crate::traffic_cmd::Scene,
     speed: f64,
     paused: bool,
-    /// The followed aircraft and where it was last frame.
-    follow: Option<(u64, DVec3)>,
+    /// The camera following an aircraft.
+    follow: Option<globus_engine::Follow>,
 }
 
 impl ViewerTraffic {
@@ -445,8 +445,8 @@ impl State {
         };
     }
 
-    /// C: follow the selected aircraft (the camera moves with it, keeping its view), or
-    /// stop following.
+    /// C: follow the selected aircraft (the camera looks at it from behind and above, then
+    /// moves with it, keeping the view the user gives it), or stop following.
     fn toggle_follow(&mut self) {
         let Some(t) = self.traffic.as_mut() else {
             return;
@@ -458,10 +458,9 @@ impl State {
             tracing::warn!("nothing to follow: click an aircraft first");
             return;
         };
-        let Some(at) = t.scene.layer.drawn_position(id) else {
+        let Some(at) = t.scene.layer.position_now(id) else {
             return;
         };
-        // Look at it from 3 km behind and above, then keep that offset.
         let view = *self.controller.view();
         let up = self
             .globe
@@ -476,25 +475,7 @@ impl State {
         {
             self.controller.set_view(to);
         }
-        t.follow = Some((id, at));
-    }
-
-    /// Keeps a followed aircraft where it is on the screen: the camera moves as it moved.
-    fn follow(&mut self) {
-        let Some(t) = self.traffic.as_mut() else {
-            return;
-        };
-        let Some((id, last)) = t.follow else {
-            return;
-        };
-        let Some(now) = t.scene.layer.drawn_position(id) else {
-            t.follow = None;
-            return;
-        };
-        let mut view = *self.controller.view();
-        view.position += now - last;
-        self.controller.set_view(view);
-        t.follow = Some((id, now));
+        t.follow = globus_engine::Follow::start(&t.scene.layer, id);
     }
 
     /// A click: selects the aircraft under the cursor (printed as one JSON line), or prints
@@ -579,6 +560,15 @@ impl State {
         self.controller.fly(&self.globe, forward, right, up, dt);
         if let Some(t) = self.traffic.as_mut() {
             t.tick(dt);
+            // The camera moves with the followed aircraft before the frame is drawn.
+            if let Some(f) = t.follow.as_mut() {
+                let mut view = *self.controller.view();
+                if f.update(&t.scene.layer, &mut view) {
+                    self.controller.set_view(view);
+                } else {
+                    t.follow = None;
+                }
+            }
         }
     }
 
@@ -617,8 +607,6 @@ impl State {
             }
             self.globe.render(&mut encoder, &target, &mut overlays);
         }
-        // The followed aircraft's new position is known once the layer placed it.
-        self.follow();
         self.gpu.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
         self.gpu.queue.present(frame);

@@ -210,3 +210,62 @@ fn bad_traffic_input_is_one_line() {
         &["--speed"],
     );
 }
+
+#[test]
+fn built_in_models_are_written_as_glb_and_read_back_with_model() {
+    let dir = scratch("traffic-cli", "models");
+    let made = json(&globus(&["traffic", "models", "--out", s(&dir)]));
+    assert_eq!(made["models"].as_array().map(Vec::len), Some(4));
+    let glb = dir.join("widebody.glb");
+    let bytes = std::fs::read(&glb).expect("written");
+    assert_eq!(&bytes[..4], b"glTF");
+    let record = globus_test_support::shared_data(SWISS);
+    let png = dir.join("x.png");
+    let spec = format!("narrowbody={}", s(&glb));
+    let out = globus(&[
+        "render",
+        "--camera",
+        "8.2,46.8,450000,0,-90",
+        "--size",
+        "64x48",
+        "--traffic",
+        s(&record),
+        "--time",
+        "2018-08-01T14:00:00Z",
+        "--model",
+        &spec,
+        "--out",
+        s(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let readme = globus_test_support::workspace_root().join("README.md");
+    for (model, needles) in [
+        (
+            format!("jumbo={}", s(&glb)),
+            vec!["jumbo", "light, narrowbody, widebody, helicopter"],
+        ),
+        (format!("light={}", s(&readme)), vec!["README.md", "glTF"]),
+        (s(&glb).to_string(), vec!["KIND=FILE.glb"]),
+    ] {
+        fails_with_one_line(
+            &[
+                "render",
+                "--camera",
+                "8,46,400000,0,-90",
+                "--size",
+                "64x48",
+                "--traffic",
+                s(&record),
+                "--model",
+                &model,
+                "--out",
+                s(&png),
+            ],
+            &needles,
+        );
+    }
+}

@@ -81,7 +81,7 @@ pub use globus_vector::{Feature, StyleRules};
 pub use headless::{Headless, RenderedFrame, holes_inside, save_png};
 pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};
-pub use traffic::{TrafficLayer, TrafficStats, TrafficStyle};
+pub use traffic::{Follow, TrafficLayer, TrafficStats, TrafficStyle};
 pub use vector::{FeatureId, VectorLayer, VectorStats};
 
 pub use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid, View};

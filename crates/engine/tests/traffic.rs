@@ -415,3 +415,88 @@ fn labels_are_decluttered_at_their_aircraft_and_hidden_behind_the_planet() {
     assert_eq!(stray, 0, "pixels changed away from every label");
     assert!(ink.iter().all(|&n| n > 20), "a label without text: {ink:?}");
 }
+
+/// A replayed record: clicking an aircraft gives back its ICAO address, and a camera
+/// following it keeps it at the centre of the picture while it flies on.
+#[test]
+fn picking_returns_the_icao24_and_following_keeps_the_aircraft_centred() {
+    use globus_engine::traffic::{Record, Replay, ReplayOptions};
+    use globus_traffic::record::{Report, Track};
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    // Three aircraft eastbound over the Atlantic, a report every 10 s.
+    let track = |icao24: u32, lat: f64| Track {
+        icao24,
+        callsign: format!("X{icao24:x}"),
+        typecode: "B77W".into(),
+        reports: (0..120)
+            .map(|k| Report {
+                time_s: f64::from(k) * 10.0,
+                lat_deg: lat + f64::from(k) * 0.001,
+                lon_deg: -40.0 + f64::from(k) * 0.03,
+                altitude_m: 11_000.0,
+                velocity_mps: 250.0,
+                heading_deg: 87.0,
+                vertical_rate_mps: 0.0,
+                on_ground: false,
+            })
+            .collect(),
+    };
+    let record = Record {
+        tracks: vec![
+            track(0x3c6444, 30.0),
+            track(0x4ca123, 30.05),
+            track(0xa1b2c3, 30.1),
+        ],
+        skipped: Vec::new(),
+        rows: 0,
+    };
+    let followed = record.tracks[1].clone();
+    let mut replay = Replay::new(record, ReplayOptions::default());
+    let mut layer = TrafficLayer::new();
+    layer.play(&mut replay, 100.0).expect("play");
+    // A first frame makes the body known to the layer; then look at the middle aircraft
+    // from 3 km behind and above.
+    let first =
+        common::camera(-37.0, 30.0, 500_000.0, 0.0, -90.0, false).view(off.globe(), 50.0, w, h);
+    render(&mut off, &first, &mut layer, "follow-0");
+    let id = Replay::id_of(1, followed.icao24);
+    let at = layer.position_now(id).expect("drawn");
+    let up = off.globe().ellipsoid().geodetic_normal(at).expect("up");
+    let enu = off.globe().ellipsoid().enu_frame_at(at).expect("frame");
+    let eye = at - enu.east * 2_500.0 + up * 1_500.0;
+    let mut view = View::look_at(eye, at, up, 50f64.to_radians(), w, h).expect("view");
+    let mut follow = globus_engine::Follow::start(&layer, id).expect("follow");
+    let centre = DVec2::new(f64::from(w) / 2.0, f64::from(h) / 2.0);
+    for step in 1..=5 {
+        let t = 100.0 + f64::from(step) * 23.0;
+        layer.play(&mut replay, t).expect("play");
+        assert!(follow.update(&layer, &mut view));
+        render(&mut off, &view, &mut layer, &format!("follow-{step}"));
+        // Where the record puts it now (interpolated here from the raw reports).
+        let k = (t / 10.0).floor() as usize;
+        let f = t / 10.0 - k as f64;
+        let (a, b) = (&followed.reports[k], &followed.reports[k + 1]);
+        let lon = a.lon_deg + (b.lon_deg - a.lon_deg) * f;
+        let lat = a.lat_deg + (b.lat_deg - a.lat_deg) * f;
+        let p = project(off.globe(), lon, lat, 11_000.0);
+        assert!(
+            (p - centre).length() < 1.0,
+            "step {step}: the aircraft is at {p:?}"
+        );
+        let pick = off
+            .globe()
+            .pick(centre.x, centre.y)
+            .expect("pick")
+            .expect("inside");
+        let picked = pick
+            .object()
+            .and_then(|o| layer.aircraft_for_pick(o))
+            .expect("an aircraft");
+        assert_eq!(Replay::icao24_of(picked), 0x4ca123);
+        assert_eq!(
+            replay.track_of(picked).map(|t| t.callsign.as_str()),
+            Some("X4ca123")
+        );
+    }
+}

@@ -342,6 +342,11 @@ impl Fleet {
         self.slot_of.get(&id).copied()
     }
 
+    /// A live object's flags.
+    pub fn flags_of(&self, id: u64) -> Option<u32> {
+        self.slot_of.get(&id).map(|&s| self.flags[s as usize])
+    }
+
     /// The live object in a slot.
     pub fn id_in_slot(&self, slot: u32) -> Option<u64> {
         let s = slot as usize;

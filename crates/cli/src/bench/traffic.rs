@@ -35,6 +35,7 @@ pub fn run(
     }
     let read_started = Instant::now();
     let mut scene = traffic_cmd::scene(record, a.time.as_deref(), None)?;
+    traffic_cmd::apply_models(&mut scene.layer, &a.models)?;
     let read_s = read_started.elapsed().as_secs_f64();
     if a.time.is_none() {
         // When the most aircraft are in the air.

@@ -18,6 +18,7 @@
 //! [`TrafficLayer::aircraft_for_pick`] maps a [`crate::Pick::object`] back to the aircraft.
 
 mod blocks;
+pub mod glb;
 mod gpu;
 pub mod models;
 
@@ -31,6 +32,7 @@ use crate::labels::{LabelPlacer, LabelRequest, PlacedLabel};
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use crate::text::GlyphAtlas;
 use blocks::{BlockContent, LaidOut};
+pub use glb::{ModelError, read_glb, write_glb};
 use globus_geo::EllipsoidalOccluder;
 pub use globus_traffic::fleet::{callsign_bytes, flags as aircraft_flags};
 pub use globus_traffic::{
@@ -354,6 +356,27 @@ impl TrafficLayer {
         self.drawn_at.get(slot).copied().filter(|p| p.is_finite())
     }
 
+    /// Where an aircraft is drawn at the layer's time (ECEF, exaggerated; on the ground it
+    /// last had under it when on or near it), computed now from its samples: a camera
+    /// following it moves by this before the frame is drawn. `None` before the first frame
+    /// (the body is not known yet) or for an id not in the fleet.
+    pub fn position_now(&self, id: u64) -> Option<DVec3> {
+        let (ellipsoid, exaggeration) = self.built_for?;
+        let slot = self.fleet.slot_of(id)? as usize;
+        let ([lon, lat, alt], _) = self.fleet.state_of(id, self.time_s)?;
+        let on_ground = self
+            .fleet
+            .flags_of(id)
+            .is_some_and(|f| f & flags::ON_GROUND != 0);
+        let ground = self.slots.get(slot).map_or(f64::NAN, |s| s.ground_m);
+        let alt_m = drawn_altitude_m(alt, on_ground, ground);
+        Some(crate::globe::exaggerated(
+            &ellipsoid,
+            exaggeration,
+            Cartographic::from_degrees(lon, lat, alt_m),
+        ))
+    }
+
     /// What the layer holds and what its last frame cost.
     pub fn stats(&self) -> TrafficStats {
         TrafficStats {
@@ -497,11 +520,12 @@ impl TrafficLayer {
             let slot = sampled.slots[r] as usize;
             let [lon, lat, alt] = sampled.positions[r];
             let on_ground = sampled.flags[r] & flags::ON_GROUND != 0;
-            let mut alt_m = alt;
-            if on_ground || alt < GROUND_CHECK_BELOW_M {
-                let ground = self.ground_m(frame, slot, lon, lat);
-                alt_m = if on_ground { ground } else { alt.max(ground) };
-            }
+            let ground = if on_ground || alt < GROUND_CHECK_BELOW_M {
+                self.ground_m(frame, slot, lon, lat)
+            } else {
+                f64::NAN
+            };
+            let alt_m = drawn_altitude_m(alt, on_ground, ground);
             let world = frame.world_position(Cartographic::from_degrees(lon, lat, alt_m));
             let normal = ellipsoid.geodetic_normal(world).unwrap_or(DVec3::Z);
             let kind = usize::from(sampled.kinds[r] & 3);
@@ -736,6 +760,50 @@ impl ViewCone {
         let sr = radius / d;
         let cr = (1.0 - sr * sr).sqrt();
         along >= cr || along * cr + across * sr >= self.cos_half
+    }
+}
+
+/// The altitude an aircraft is drawn at: on the ground when it says so, never below it
+/// (`ground_m` NaN: not known, the altitude as given).
+fn drawn_altitude_m(alt_m: f64, on_ground: bool, ground_m: f64) -> f64 {
+    match (on_ground, ground_m.is_nan()) {
+        (_, true) => alt_m,
+        (true, false) => ground_m,
+        (false, false) => alt_m.max(ground_m),
+    }
+}
+
+/// A camera following an aircraft: each frame, before it is drawn, the view moves as the
+/// aircraft moved since the last, so the aircraft stays where it is on the screen while the
+/// user still turns and zooms the view around it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Follow {
+    id: u64,
+    last: DVec3,
+}
+
+impl Follow {
+    /// Starts following `id` where it is now (`None` if it is not drawn yet).
+    pub fn start(layer: &TrafficLayer, id: u64) -> Option<Self> {
+        Some(Self {
+            id,
+            last: layer.position_now(id)?,
+        })
+    }
+
+    /// The followed aircraft.
+    pub fn id(&self) -> u64 {
+        self.id
+    }
+
+    /// Moves `view` with the aircraft; `false` once it has left the fleet.
+    pub fn update(&mut self, layer: &TrafficLayer, view: &mut globus_geo::View) -> bool {
+        let Some(now) = layer.position_now(self.id) else {
+            return false;
+        };
+        view.position += now - self.last;
+        self.last = now;
+        true
     }
 }
 

@@ -47,6 +47,22 @@ impl ModelMesh {
         (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f32::max)
     }
 
+    /// A mesh of triangles (three positions each, model metres) with flat normals; those
+    /// flagged `true` are accents. Degenerate triangles are left out.
+    pub fn from_triangles(triangles: impl IntoIterator<Item = ([[f32; 3]; 3], bool)>) -> Self {
+        let mut m = Self::default();
+        for ([a, b, c], accent) in triangles {
+            m.push_triangle(a, b, c, accent);
+        }
+        m
+    }
+
+    pub(crate) fn push_triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3], accent: bool) {
+        self.accent = u8::from(accent);
+        self.triangle(a, b, c);
+        self.accent = 0;
+    }
+
     /// Paints what is added next as an accent (or not).
     fn accent(&mut self, on: bool) -> &mut Self {
         self.accent = u8::from(on);
