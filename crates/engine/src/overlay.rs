@@ -132,6 +132,17 @@ impl FrameContext<'_> {
         crate::query::ground_height_m(self.layer, lon_rad, lat_rad)
     }
 
+    /// The ground height (true metres) of the terrain loaded at a longitude and latitude
+    /// (radians): what is drawn there, from the cached tiles' grids (a quick lookup), or
+    /// [`FrameContext::ground_height_m`] where nothing is loaded. What moving objects stand
+    /// on, so they meet the drawn ground.
+    pub fn loaded_ground_m(&self, lon_rad: f64, lat_rad: f64) -> f64 {
+        crate::query::height_at(self.layer, lon_rad, lat_rad).map_or_else(
+            || crate::query::ground_height_m(self.layer, lon_rad, lat_rad),
+            |h| h.height_m(),
+        )
+    }
+
     /// The ECEF point drawn for a geodetic position: its height above the ellipsoid raised
     /// by the exaggeration, as the terrain's is (see [`crate::Globe::world_position`]).
     pub fn world_position(&self, at: Cartographic) -> DVec3 {

@@ -500,3 +500,152 @@ fn picking_returns_the_icao24_and_following_keeps_the_aircraft_centred() {
         );
     }
 }
+
+/// Altitudes follow the exaggeration, as the terrain's do; an aircraft on the ground sits on
+/// the terrain as drawn whatever altitude it reports, and one reporting an altitude under the ground
+/// is drawn on it.
+#[test]
+fn aircraft_follow_the_exaggeration_and_sit_on_the_ground() {
+    let (w, h) = (160u32, 120u32);
+    let mut builder = Globe::builder();
+    builder.exaggeration(2.0);
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+    let mut layer = TrafficLayer::new();
+    let mut batch = Batch::default();
+    let mut taxiing = sample(1, 0.0, 7.6, 46.0, 0.0, 10.0, MAGENTA);
+    taxiing.flags = globus_engine::traffic::aircraft_flags::ON_GROUND;
+    batch.push(taxiing);
+    // Reports 10 m above the ellipsoid in the (procedural) Alps: under the ground there.
+    batch.push(sample(2, 0.0, 7.7, 46.1, 10.0, 10.0, MAGENTA));
+    batch.push(sample(3, 0.0, 7.8, 46.2, 9_000.0, 10.0, MAGENTA));
+    layer.apply(&batch).expect("apply");
+    layer.set_time(0.0);
+    let view = common::camera(7.7, 46.1, 60_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    render(&mut off, &view, &mut layer, "ground");
+    let globe = off.globe();
+    // Drawn height above the ellipsoid (exaggerated), and the true one it stands for.
+    let drawn = |id| {
+        let p = layer.position_now(id).expect("drawn");
+        globe
+            .ellipsoid()
+            .ecef_to_cartographic(p)
+            .expect("on the body")
+            .height_m
+    };
+    let height = |id| {
+        let p = layer.position_now(id).expect("drawn");
+        globe.cartographic(p).expect("on the body").height_m
+    };
+    // The ground as drawn: the loaded tiles' heights.
+    let ground = |lon: f64, lat: f64| {
+        globe
+            .height_at(lon.to_radians(), lat.to_radians())
+            .expect("loaded")
+            .height_m()
+    };
+    let (g1, g2) = (ground(7.6, 46.0), ground(7.7, 46.1));
+    assert!(
+        g1 > 100.0 && g2 > 100.0,
+        "the Alps should be above sea level: {g1} {g2}"
+    );
+    assert!((height(1) - g1).abs() < 0.01, "{} vs {g1}", height(1));
+    assert!((height(2) - g2).abs() < 0.01, "{} vs {g2}", height(2));
+    assert!((height(3) - 9_000.0).abs() < 0.01, "{}", height(3));
+    // Drawn twice as high, as the terrain is.
+    assert!((drawn(1) - 2.0 * g1).abs() < 0.01 && (drawn(3) - 18_000.0).abs() < 0.01);
+}
+
+/// Low over the procedural Alps, an aircraft with a mountain between it and the camera shows
+/// neither its symbol nor its label, though its label has a place on the screen; one in the
+/// open sky shows both.
+#[test]
+fn a_mountain_hides_an_aircraft_and_its_label() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let spec = common::camera(7.6, 46.0, 300.0, 0.0, 0.0, true);
+    let view = spec.view(off.globe(), 60.0, w, h);
+    let plain = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    // Along the view, find a point 2 km past the first terrain the line of sight meets:
+    // hidden. And one in the sky above it: seen.
+    let eye = view.position;
+    let ahead = view.forward();
+    let hit = off
+        .globe()
+        .ray_pick(eye, ahead)
+        .expect("the line of sight meets a mountain");
+    let d = (hit - eye).length();
+    assert!(d > 500.0, "the mountain is {d} m away");
+    let hidden_at = eye + ahead * (d + 2_000.0);
+    // Ten degrees above the line of sight, 6 km out, with nothing in front of it.
+    let up = off.globe().ellipsoid().geodetic_normal(eye).expect("up");
+    let raised = (ahead * 10f64.to_radians().cos() + up * 10f64.to_radians().sin()).normalize();
+    let seen_at = eye + raised * 6_000.0;
+    assert!(
+        off.globe()
+            .ray_pick(eye, raised)
+            .is_none_or(|p| (p - eye).length() > 6_000.0),
+        "the open aircraft is hidden too"
+    );
+    let place = |p| off.globe().cartographic(p).expect("on the body");
+    let (hc, sc) = (place(hidden_at), place(seen_at));
+    let mut layer = TrafficLayer::new();
+    let mut batch = Batch::default();
+    batch.push(sample(
+        1,
+        0.0,
+        hc.lon_deg(),
+        hc.lat_deg(),
+        hc.height_m,
+        90.0,
+        MAGENTA,
+    ));
+    batch.push(sample(
+        2,
+        0.0,
+        sc.lon_deg(),
+        sc.lat_deg(),
+        sc.height_m,
+        90.0,
+        CYAN,
+    ));
+    layer.apply(&batch).expect("apply");
+    layer.set_time(0.0);
+    let img = render(&mut off, &view, &mut layer, "behind-a-mountain");
+    let labels: Vec<(u64, [f32; 4], f32)> = layer.drawn_labels().collect();
+    let changed_in = |b: &[f32; 4]| {
+        let mut n = 0;
+        for y in (b[1].max(0.0) as u32)..(b[3].min(h as f32) as u32) {
+            for x in (b[0].max(0.0) as u32)..(b[2].min(w as f32) as u32) {
+                let (p, q) = (img.get(x, y), plain.get(x, y));
+                if (0..3).any(|c| (i32::from(p[c]) - i32::from(q[c])).abs() > 12) {
+                    n += 1;
+                }
+            }
+        }
+        n
+    };
+    let hidden_label = labels.iter().find(|l| l.0 == 1).expect("placed on the CPU");
+    let seen_label = labels.iter().find(|l| l.0 == 2).expect("placed");
+    assert_eq!(
+        changed_in(&hidden_label.1),
+        0,
+        "the hidden aircraft's label shows"
+    );
+    assert!(
+        changed_in(&seen_label.1) > 20,
+        "the visible aircraft's label is missing"
+    );
+    let hp = project(off.globe(), hc.lon_deg(), hc.lat_deg(), hc.height_m);
+    assert!(
+        pixels_of(&img, MAGENTA, hp, 12.0).is_empty(),
+        "the hidden symbol shows"
+    );
+    let sp = project(off.globe(), sc.lon_deg(), sc.lat_deg(), sc.height_m);
+    assert!(
+        pixels_of(&img, CYAN, sp, 12.0).len() > 10,
+        "the visible symbol is missing"
+    );
+}

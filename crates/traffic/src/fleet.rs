@@ -19,7 +19,7 @@
 //! one shared allocation): a sample appends in O(1), overwriting the oldest; what is drawn is
 //! the part newer than [`FleetOptions::trail_s`].
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// Flag bits of an object.
 pub mod flags {
@@ -278,7 +278,7 @@ impl Sampled {
 #[derive(Clone, Debug, Default)]
 pub struct Fleet {
     options: FleetOptions,
-    slot_of: HashMap<u64, u32>,
+    slot_of: FxHashMap<u64, u32>,
     free: Vec<u32>,
     live: Vec<bool>,
     ids: Vec<u64>,

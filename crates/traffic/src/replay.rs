@@ -95,7 +95,9 @@ pub struct Replay {
     next_start: usize,
     due: BinaryHeap<Due>,
     time_s: f64,
+    /// Per track: its kind and call sign as the fleet takes them.
     kinds: Vec<u8>,
+    callsigns: Vec<[u8; crate::fleet::CALLSIGN_BYTES]>,
 }
 
 const NOT_STARTED: u32 = u32::MAX;
@@ -116,6 +118,11 @@ impl Replay {
             .iter()
             .map(|t| AircraftKind::from_typecode(&t.typecode).index())
             .collect();
+        let callsigns = record
+            .tracks
+            .iter()
+            .map(|t| callsign_bytes(&t.callsign))
+            .collect();
         let n = record.tracks.len();
         Self {
             record,
@@ -127,6 +134,7 @@ impl Replay {
             due: BinaryHeap::new(),
             time_s: f64::NEG_INFINITY,
             kinds,
+            callsigns,
         }
     }
 
@@ -294,7 +302,7 @@ impl Replay {
                 0
             },
             speeds: [r.velocity_mps, r.vertical_rate_mps],
-            callsign: callsign_bytes(&tr.callsign),
+            callsign: self.callsigns[track],
         });
     }
 }

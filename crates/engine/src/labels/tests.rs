@@ -219,7 +219,7 @@ fn labels_keep_off_obstacles() {
 #[test]
 fn the_obstacle_table_never_misses_an_overlap_and_refuses_only_near_ones() {
     let mut rng = Rng(5);
-    let obstacles: Vec<[f32; 4]> = (0..300)
+    let obstacles: Vec<[f32; 4]> = (0..3_000)
         .map(|_| {
             let (x, y) = (rng.next() * VIEW[0], rng.next() * VIEW[1]);
             [
@@ -232,6 +232,24 @@ fn the_obstacle_table_never_misses_an_overlap_and_refuses_only_near_ones() {
         .collect();
     let mut map = ObstacleMap::default();
     map.build(&obstacles, VIEW);
+    assert!(map.dense);
+    // Few obstacles take the exact path: no refusals beyond true overlaps.
+    let mut few = ObstacleMap::default();
+    few.build(&obstacles[..100], VIEW);
+    assert!(!few.dense);
+    for _ in 0..5_000 {
+        let (x, y) = (rng.next() * VIEW[0], rng.next() * VIEW[1]);
+        let b = [
+            x,
+            y,
+            x + 10.0 + rng.next() * 60.0,
+            y + 10.0 + rng.next() * 40.0,
+        ];
+        assert_eq!(
+            few.meets(&b),
+            obstacles[..100].iter().any(|o| overlaps(o, &b))
+        );
+    }
     let grown = |b: &[f32; 4], by: f32| [b[0] - by, b[1] - by, b[2] + by, b[3] + by];
     for _ in 0..20_000 {
         let (x, y) = (rng.next() * VIEW[0], rng.next() * VIEW[1]);

@@ -56,8 +56,9 @@ const REANCHOR_M: f64 = 300_000.0;
 /// Below this altitude an aircraft may meet the ground (nothing on Earth is higher).
 const GROUND_CHECK_BELOW_M: f64 = 9_000.0;
 /// Ground heights looked up per frame at most (the rest use their last answer).
-const GROUND_QUERIES_PER_FRAME: u32 = 512;
-/// How far an aircraft moves before its ground height is looked up again, degrees.
+const GROUND_QUERIES_PER_FRAME: u32 = 256;
+/// How far an aircraft near the ground moves before its ground height is looked up again,
+/// degrees (ten times as far when it is 2 km above it).
 const GROUND_REFRESH_DEG: f64 = 0.002;
 /// How much nearer than its depth the terrain may be at a symbol's centre before the symbol
 /// is hidden (fraction of the depth).
@@ -393,15 +394,25 @@ impl TrafficLayer {
         slot: usize,
         lon_deg: f64,
         lat_deg: f64,
+        alt_m: f64,
     ) -> f64 {
         let s = &mut self.slots[slot];
         let moved = (s.ground_at[0] - lon_deg)
             .abs()
             .max((s.ground_at[1] - lat_deg).abs());
-        let stale =
-            moved.is_nan() || moved > GROUND_REFRESH_DEG || self.frame - s.ground_frame > 60;
+        // The higher above the ground it was, the farther it may go before the ground can
+        // have risen to it.
+        let clearance = alt_m - s.ground_m;
+        let reach = if clearance > 2_000.0 {
+            GROUND_REFRESH_DEG * 10.0
+        } else if clearance > 300.0 {
+            GROUND_REFRESH_DEG * 3.0
+        } else {
+            GROUND_REFRESH_DEG
+        };
+        let stale = moved.is_nan() || moved > reach || self.frame - s.ground_frame > 60;
         if stale && (s.ground_m.is_nan() || self.stats.ground_queries < GROUND_QUERIES_PER_FRAME) {
-            s.ground_m = frame.ground_height_m(lon_deg.to_radians(), lat_deg.to_radians());
+            s.ground_m = frame.loaded_ground_m(lon_deg.to_radians(), lat_deg.to_radians());
             s.ground_at = [lon_deg, lat_deg];
             s.ground_frame = self.frame;
             self.stats.ground_queries += 1;
@@ -413,7 +424,7 @@ impl TrafficLayer {
     fn trail_world(frame: &FrameContext<'_>, p: [f64; 3]) -> DVec3 {
         let mut alt = p[2];
         if alt < GROUND_CHECK_BELOW_M {
-            alt = alt.max(frame.ground_height_m(p[0].to_radians(), p[1].to_radians()));
+            alt = alt.max(frame.loaded_ground_m(p[0].to_radians(), p[1].to_radians()));
         }
         frame.world_position(Cartographic::from_degrees(p[0], p[1], alt))
     }
@@ -521,7 +532,7 @@ impl TrafficLayer {
             let [lon, lat, alt] = sampled.positions[r];
             let on_ground = sampled.flags[r] & flags::ON_GROUND != 0;
             let ground = if on_ground || alt < GROUND_CHECK_BELOW_M {
-                self.ground_m(frame, slot, lon, lat)
+                self.ground_m(frame, slot, lon, lat, alt)
             } else {
                 f64::NAN
             };
