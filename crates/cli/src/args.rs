@@ -115,13 +115,10 @@ pub struct GlobeArgs {
 
 #[derive(Args)]
 pub struct ViewArgs {
-    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG.
-    #[arg(
-        long,
-        allow_hyphen_values = true,
-        default_value = "10,30,15000000,0,-90"
-    )]
-    pub camera: String,
+    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default 10,30,15000000,0,-90:
+    /// the whole planet; for a replay, looking down on its aircraft).
+    #[arg(long, allow_hyphen_values = true)]
+    pub camera: Option<String>,
     /// ALT_M is above the ground under the camera, not above the ellipsoid.
     #[arg(long)]
     pub above_ground: bool,
@@ -293,6 +290,21 @@ pub enum GeoCommand {
         #[arg(long)]
         level: u8,
     },
+}
+
+/// The planet-wide view `globus view` starts from.
+pub const DEFAULT_VIEW_CAMERA: &str = "10,30,15000000,0,-90";
+
+impl ViewArgs {
+    /// `--exit-after` as a duration (checked).
+    pub fn exit_after(&self) -> anyhow::Result<Option<std::time::Duration>> {
+        match self.exit_after {
+            Some(s) if !(s > 0.0 && s.is_finite()) => {
+                bail!("--exit-after {s} must be a positive number of seconds")
+            }
+            other => Ok(other.map(std::time::Duration::from_secs_f64)),
+        }
+    }
 }
 
 /// The vector layer of the config file's `[[vector]]` tables and the `--vector` arguments

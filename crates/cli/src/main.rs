@@ -13,9 +13,6 @@ mod tile_cmd;
 mod traffic_cmd;
 mod viewer;
 
-use std::time::Duration;
-
-use anyhow::bail;
 use clap::Parser;
 
 use crate::args::{Cli, Command, GeoCommand, TileCommand, TileJobCommand, ViewArgs};
@@ -200,20 +197,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 fn view(a: ViewArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
-    let camera = args::parse_camera(&a.camera, a.above_ground)?;
+    let camera = args::parse_camera(
+        a.camera.as_deref().unwrap_or(args::DEFAULT_VIEW_CAMERA),
+        a.above_ground,
+    )?;
+    let exit_after = a.exit_after()?;
     let globe = args::globe_builder(&a.globe)?;
-    if let Some(s) = a.exit_after
-        && !(s > 0.0 && s.is_finite())
-    {
-        bail!("--exit-after {s} must be a positive number of seconds");
-    }
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,
         fov_deg: a.globe.fov_deg,
         width,
         height,
-        exit_after: a.exit_after.map(Duration::from_secs_f64),
+        exit_after,
         vectors: args::vector_layer(&a.globe)?,
         traffic: None,
     })

@@ -3,7 +3,6 @@
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
@@ -13,7 +12,7 @@ use globus_traffic::synth::{self, SynthOptions};
 use globus_traffic::{AircraftKind, read_record};
 use serde_json::json;
 
-use crate::args::{self, GlobeArgs};
+use crate::args;
 use crate::viewer;
 
 /// `globus traffic`: a subcommand, or the replay viewer's options.
@@ -41,21 +40,8 @@ pub struct TrafficViewArgs {
     /// moment).
     #[arg(long)]
     pub start: Option<String>,
-    /// Start camera LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default: looking down on the
-    /// record's aircraft).
-    #[arg(long, allow_hyphen_values = true)]
-    pub camera: Option<String>,
-    /// ALT_M is above the ground under the camera.
-    #[arg(long)]
-    pub above_ground: bool,
-    /// Window size, WxH.
-    #[arg(long, default_value = "1280x720")]
-    pub size: String,
     #[command(flatten)]
-    pub globe: GlobeArgs,
-    /// Close the window after this many seconds (for automated checks).
-    #[arg(long)]
-    pub exit_after: Option<f64>,
+    pub view: crate::args::ViewArgs,
     /// Draw one kind with a glTF 2.0 binary model: KIND=FILE.glb, KIND one of light,
     /// narrowbody, widebody, helicopter. Repeatable.
     #[arg(long = "model")]
@@ -221,27 +207,24 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
             a.speed
         );
     }
-    if let Some(s) = a.exit_after
-        && !(s > 0.0 && s.is_finite())
-    {
-        bail!("--exit-after {s} must be a positive number of seconds");
-    }
-    let (width, height) = args::parse_size(&a.size)?;
-    let globe = args::globe_builder(&a.globe)?;
-    let vectors = args::vector_layer(&a.globe)?;
+    let v = &a.view;
+    let exit_after = v.exit_after()?;
+    let (width, height) = args::parse_size(&v.size)?;
+    let globe = args::globe_builder(&v.globe)?;
+    let vectors = args::vector_layer(&v.globe)?;
     let mut scene = scene(record, a.start.as_deref(), None)?;
     apply_models(&mut scene.layer, &a.models)?;
-    let camera = match &a.camera {
-        Some(c) => args::parse_camera(c, a.above_ground)?,
+    let camera = match &v.camera {
+        Some(c) => args::parse_camera(c, v.above_ground)?,
         None => default_camera(&scene.replay),
     };
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,
-        fov_deg: a.globe.fov_deg,
+        fov_deg: v.globe.fov_deg,
         width,
         height,
-        exit_after: a.exit_after.map(Duration::from_secs_f64),
+        exit_after,
         vectors,
         traffic: Some(viewer::ViewerTraffic::new(scene, a.speed)),
     })

@@ -28,7 +28,7 @@ fn requests(n: usize) -> Vec<LabelRequest> {
 }
 
 fn placement(c: &mut Criterion) {
-    for n in [4_000usize, 16_000] {
+    for n in [30usize, 4_000, 16_000] {
         let mut reqs = requests(n);
         // Every aircraft's symbol, 18 px square, is an obstacle.
         let symbols: Vec<[f32; 4]> = reqs

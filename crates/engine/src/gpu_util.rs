@@ -1,5 +1,5 @@
 //! Small wgpu helpers the engine's built-in overlays share: buffers that grow by doubling,
-//! and bind-group layout entries.
+//! bind-group layout entries, and render pipelines of one shader module.
 
 /// A buffer that grows by doubling, keeping its contents (copied on the GPU).
 pub(crate) struct Growing {
@@ -103,5 +103,48 @@ pub(crate) fn texture_entry(
             multisampled: false,
         },
         count: None,
+    }
+}
+
+/// Makes the render pipelines of one shader module and pipeline layout.
+pub(crate) struct Pipelines<'a> {
+    pub device: &'a wgpu::Device,
+    pub layout: &'a wgpu::PipelineLayout,
+    pub module: &'a wgpu::ShaderModule,
+}
+
+impl Pipelines<'_> {
+    /// A pipeline of entry points `vs` and `fs`, triangle lists, no multisampling.
+    pub(crate) fn make(
+        &self,
+        label: &str,
+        vs: &str,
+        fs: &str,
+        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+        depth: wgpu::DepthStencilState,
+        targets: &[Option<wgpu::ColorTargetState>],
+    ) -> wgpu::RenderPipeline {
+        self.device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(self.layout),
+                vertex: wgpu::VertexState {
+                    module: self.module,
+                    entry_point: Some(vs),
+                    compilation_options: Default::default(),
+                    buffers,
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: Some(depth),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: self.module,
+                    entry_point: Some(fs),
+                    compilation_options: Default::default(),
+                    targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
     }
 }

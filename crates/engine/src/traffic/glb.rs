@@ -296,7 +296,12 @@ pub fn write_glb(mesh: &ModelMesh) -> Vec<u8> {
         views.join(","),
         accessors.join(",")
     );
-    let mut json = json.into_bytes();
+    pack_glb(json.into_bytes(), bin)
+}
+
+/// A GLB container: the header, the JSON chunk (padded with spaces) and the binary chunk
+/// (padded with zeros).
+pub(crate) fn pack_glb(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }

@@ -10,7 +10,7 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 
 use super::models::ModelMesh;
-use crate::gpu_util::{Growing, buffer, buffer_entry, texture_entry};
+use crate::gpu_util::{Growing, Pipelines, buffer, buffer_entry, texture_entry};
 use crate::overlay::FrameContext;
 use crate::text::GlyphAtlas;
 
@@ -124,7 +124,10 @@ pub(crate) const PAGE_POINTS: usize = 256;
 pub(crate) const TRAIL_BUCKETS: [u32; 3] = [6, 20, u32::MAX];
 
 /// The shader.
-pub const SHADER: &str = include_str!("traffic.wgsl");
+pub const SHADER: &str = concat!(
+    include_str!("../overlay_common.wgsl"),
+    include_str!("traffic.wgsl")
+);
 
 pub(crate) struct Gpu {
     trail: wgpu::RenderPipeline,
@@ -202,33 +205,10 @@ impl Gpu {
         });
         let formats = frame.formats();
         let blend = Some(wgpu::BlendState::ALPHA_BLENDING);
-        let pipeline = |label,
-                        vs,
-                        fs,
-                        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-                        depth: wgpu::DepthStencilState,
-                        targets: &[Option<wgpu::ColorTargetState>]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some(vs),
-                    compilation_options: Default::default(),
-                    buffers,
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(depth),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fs),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+        let kit = Pipelines {
+            device,
+            layout: &pipeline_layout,
+            module: &module,
         };
         // Trails: colour only, tested against the terrain and what the world pass drew.
         let trail_attrs = wgpu::vertex_attr_array![0 => Uint32];
@@ -237,7 +217,7 @@ impl Gpu {
             step_mode: wgpu::VertexStepMode::Instance,
             attributes: &trail_attrs,
         })];
-        let trail = pipeline(
+        let trail = kit.make(
             "traffic trails",
             "trail_vs",
             "trail_fs",
@@ -259,7 +239,7 @@ impl Gpu {
                 attributes: &slot_attrs,
             }),
         ];
-        let model = pipeline(
+        let model = kit.make(
             "traffic models",
             "model_vs",
             "model_fs",
@@ -269,7 +249,7 @@ impl Gpu {
         );
         let mut no_depth_test = formats.depth_test(false);
         no_depth_test.depth_compare = Some(wgpu::CompareFunction::Always);
-        let symbol = pipeline(
+        let symbol = kit.make(
             "traffic symbols",
             "symbol_vs",
             "symbol_fs",
@@ -277,7 +257,7 @@ impl Gpu {
             no_depth_test.clone(),
             &formats.colour_targets(blend, true),
         );
-        let leader = pipeline(
+        let leader = kit.make(
             "traffic label leaders",
             "leader_vs",
             "leader_fs",
@@ -285,7 +265,7 @@ impl Gpu {
             no_depth_test.clone(),
             &formats.colour_targets(blend, false),
         );
-        let glyph = pipeline(
+        let glyph = kit.make(
             "traffic label glyphs",
             "glyph_vs",
             "glyph_fs",

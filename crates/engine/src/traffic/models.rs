@@ -225,30 +225,58 @@ fn nacelle(m: &mut ModelMesh, x: f32, y: f32, z: f32, length: f32, r: f32) {
     m.loft(&stations, 8, y);
 }
 
+/// An airliner's dimensions, metres (see [`ModelMesh::wings`] and [`ModelMesh::fin`] for the
+/// order of each part's numbers).
+struct Airliner {
+    /// Length, radius, sides.
+    fuselage: [f32; 3],
+    wing: [f32; 8],
+    tailplane: [f32; 8],
+    fin: [f32; 6],
+    /// Front x, |y|, z, length, radius of each of the two engines.
+    nacelle: [f32; 5],
+}
+
+fn airliner(m: &mut ModelMesh, a: &Airliner) {
+    let [length, radius, sides] = a.fuselage;
+    fuselage(m, length, radius, sides as usize);
+    for w in [a.wing, a.tailplane] {
+        m.wings(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]);
+    }
+    let f = a.fin;
+    m.accent(true).fin(f[0], f[1], f[2], f[3], f[4], f[5]);
+    let [x, y, z, l, r] = a.nacelle;
+    for side in [1.0, -1.0] {
+        nacelle(m, x, side * y, z, l, r);
+    }
+}
+
 /// The shape of a kind.
 pub fn aircraft_mesh(kind: AircraftKind) -> ModelMesh {
     let mut m = ModelMesh::default();
     match kind {
-        AircraftKind::NarrowBody => {
-            // Airbus A320: 37.6 m long, 35.8 m span, fuselage 3.95 m.
-            fuselage(&mut m, 37.6, 1.98, 12);
-            m.wings(3.5, 6.0, 1.5, 17.9, 7.5, -1.0, 1.2, 0.25);
-            m.wings(-14.0, 3.6, 1.4, 6.2, 3.5, 0.6, 0.3, 0.12);
-            m.accent(true).fin(-12.5, 5.5, 2.0, 1.2, 6.0, 4.5);
-            for side in [1.0, -1.0] {
-                nacelle(&mut m, 5.0, side * 5.8, -2.2, 4.5, 1.0);
-            }
-        }
-        AircraftKind::WideBody => {
-            // Boeing 777-300ER: 73.9 m long, 64.8 m span, fuselage 6.2 m.
-            fuselage(&mut m, 73.9, 3.1, 14);
-            m.wings(8.0, 12.0, 3.0, 32.4, 14.0, -1.8, 2.0, 0.45);
-            m.wings(-29.0, 7.0, 2.5, 10.6, 6.5, 1.0, 0.5, 0.2);
-            m.accent(true).fin(-26.0, 10.0, 3.5, 2.0, 10.5, 8.5);
-            for side in [1.0, -1.0] {
-                nacelle(&mut m, 11.5, side * 9.7, -3.4, 7.5, 1.7);
-            }
-        }
+        // Airbus A320: 37.6 m long, 35.8 m span, fuselage 3.95 m.
+        AircraftKind::NarrowBody => airliner(
+            &mut m,
+            &Airliner {
+                fuselage: [37.6, 1.98, 12.0],
+                wing: [3.5, 6.0, 1.5, 17.9, 7.5, -1.0, 1.2, 0.25],
+                tailplane: [-14.0, 3.6, 1.4, 6.2, 3.5, 0.6, 0.3, 0.12],
+                fin: [-12.5, 5.5, 2.0, 1.2, 6.0, 4.5],
+                nacelle: [5.0, 5.8, -2.2, 4.5, 1.0],
+            },
+        ),
+        // Boeing 777-300ER: 73.9 m long, 64.8 m span, fuselage 6.2 m.
+        AircraftKind::WideBody => airliner(
+            &mut m,
+            &Airliner {
+                fuselage: [73.9, 3.1, 14.0],
+                wing: [8.0, 12.0, 3.0, 32.4, 14.0, -1.8, 2.0, 0.45],
+                tailplane: [-29.0, 7.0, 2.5, 10.6, 6.5, 1.0, 0.5, 0.2],
+                fin: [-26.0, 10.0, 3.5, 2.0, 10.5, 8.5],
+                nacelle: [11.5, 9.7, -3.4, 7.5, 1.7],
+            },
+        ),
         AircraftKind::Light => {
             // Cessna 172: 8.3 m long, 11.0 m span, high straight wing.
             fuselage(&mut m, 8.3, 0.6, 10);

@@ -73,14 +73,6 @@ fn kind_of(a: Aircraft) -> u32 {
     return (a.bits >> 8u) & 3u;
 }
 
-// Styles are sRGB; the colour targets are sRGB formats, which expect linear values.
-fn linear(c: u32) -> vec4<f32> {
-    let s = unpack4x8unorm(c);
-    let lo = s.rgb / 12.92;
-    let hi = pow((s.rgb + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
-    return vec4<f32>(select(hi, lo, s.rgb <= vec3<f32>(0.04045)), s.a);
-}
-
 fn to_pixels(clip: vec4<f32>) -> vec2<f32> {
     let ndc = clip.xy / clip.w;
     return vec2<f32>((ndc.x * 0.5 + 0.5) * frame.viewport.x, (0.5 - ndc.y * 0.5) * frame.viewport.y);
@@ -198,7 +190,7 @@ fn trail_vs(@builtin(vertex_index) vi: u32, @location(0) slot: u32) -> TrailOut 
     out.clip = from_pixels(base + perp * side * reach, like);
     out.across_px = side * reach;
     out.age_s = select(wa, wb, e == 1u);
-    var colour = linear(a.colour);
+    var colour = srgb_to_linear(a.colour);
     if (selected) {
         colour = vec4<f32>(mix(colour.rgb, vec3<f32>(1.0, 0.9, 0.2), 0.6), 1.0);
     }
@@ -256,7 +248,7 @@ fn model_vs(v: ModelIn) -> ModelOut {
     out.clip = frame.clip_from_eye * vec4<f32>(a.position + offset, 1.0);
     out.normal = att.forward * v.normal.x + left * v.normal.y + att.up * v.normal.z;
     // White airframes; fin and nacelles in the aircraft's colour (as its symbol and trail).
-    var base = select(vec3<f32>(0.8, 0.82, 0.85), linear(a.colour).rgb, v.accent != 0u);
+    var base = select(vec3<f32>(0.8, 0.82, 0.85), srgb_to_linear(a.colour).rgb, v.accent != 0u);
     if ((a.bits & SELECTED) != 0u) {
         base = mix(base, vec3<f32>(1.0, 0.85, 0.1), 0.5);
     }
@@ -337,7 +329,7 @@ fn symbol_vs(@builtin(vertex_index) vi: u32) -> SymbolOut {
     let px = centre + (across * local.x + along * local.y) * half_size;
     out.clip = from_pixels(px, c);
     out.local = local;
-    var colour = linear(a.colour);
+    var colour = srgb_to_linear(a.colour);
     if ((a.bits & STALE) != 0u) {
         colour.a = colour.a * 0.45;
     }
@@ -382,24 +374,11 @@ fn silhouette(p_in: vec2<f32>, kind: u32) -> f32 {
     return d;
 }
 
-fn terrain_at(t: vec2<i32>) -> f32 {
-    let size = vec2<i32>(textureDimensions(terrain_depth));
-    if (any(t < vec2<i32>(0)) || any(t >= size)) {
-        return 0.0;
-    }
-    return textureLoad(terrain_depth, t, 0).r;
-}
-
 @fragment
 fn symbol_fs(in: SymbolOut) -> Target {
     // Hidden when the terrain at its centre is nearer than the aircraft (reversed-Z: nearer
     // is greater); decided once for the whole symbol, so it never shows half cut.
-    let q = vec2<i32>(floor(in.centre.xy - vec2<f32>(0.5)));
-    let nearest_far = min(
-        min(terrain_at(q), terrain_at(q + vec2<i32>(1, 0))),
-        min(terrain_at(q + vec2<i32>(0, 1)), terrain_at(q + vec2<i32>(1, 1))),
-    );
-    if (nearest_far > in.centre.z * (1.0 + frame.params.w)) {
+    if (terrain_farthest_around(in.centre.xy) > in.centre.z * (1.0 + frame.params.w)) {
         discard;
     }
     let kind = in.bits & 3u;
@@ -474,12 +453,7 @@ struct LabelStyle {
 // Whether the terrain hides the aircraft a label belongs to (the symbol's test, in the
 // vertex stage: a hidden aircraft's whole label goes).
 fn label_hidden(l: Label) -> bool {
-    let q = vec2<i32>(floor(l.anchor - vec2<f32>(0.5)));
-    let nearest_far = min(
-        min(terrain_at(q), terrain_at(q + vec2<i32>(1, 0))),
-        min(terrain_at(q + vec2<i32>(0, 1)), terrain_at(q + vec2<i32>(1, 1))),
-    );
-    return nearest_far > l.depth * (1.0 + frame.params.w);
+    return terrain_farthest_around(l.anchor) > l.depth * (1.0 + frame.params.w);
 }
 
 fn pixels_to_clip(px: vec2<f32>) -> vec4<f32> {
@@ -530,7 +504,7 @@ fn leader_fs(in: LeaderOut) -> @location(0) vec4<f32> {
 }
 
 fn label_colour(l: Label) -> vec4<f32> {
-    let c = linear(l.colour);
+    let c = srgb_to_linear(l.colour);
     return vec4<f32>(c.rgb, l.opacity);
 }
 

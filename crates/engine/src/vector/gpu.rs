@@ -21,7 +21,7 @@ use globus_tiling::TileKey;
 use globus_vector::{LineCap, LineJoin, Rgba};
 use rustc_hash::FxHashMap;
 
-use crate::gpu_util::{Growing, buffer, buffer_entry, texture_entry};
+use crate::gpu_util::{Growing, Pipelines, buffer, buffer_entry, texture_entry};
 use crate::overlay::FrameContext;
 
 /// How much nearer than its depth a draped fill is tested, as a fraction of its depth: it
@@ -298,7 +298,10 @@ pub(crate) struct Gpu {
     pub fill_vertices: u32,
 }
 /// The shader.
-pub const SHADER: &str = include_str!("vector.wgsl");
+pub const SHADER: &str = concat!(
+    include_str!("../overlay_common.wgsl"),
+    include_str!("vector.wgsl")
+);
 
 impl Gpu {
     pub(crate) fn new(frame: &FrameContext<'_>) -> Self {
@@ -338,33 +341,10 @@ impl Gpu {
         if let Some(c) = id_targets[0].as_mut() {
             c.write_mask = wgpu::ColorWrites::empty();
         }
-        let pipeline = |label,
-                        vs,
-                        fs,
-                        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
-                        depth: wgpu::DepthStencilState,
-                        targets: &[Option<wgpu::ColorTargetState>]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some(vs),
-                    compilation_options: Default::default(),
-                    buffers,
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: Some(depth),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fs),
-                    compilation_options: Default::default(),
-                    targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+        let kit = Pipelines {
+            device,
+            layout: &pipeline_layout,
+            module: &module,
         };
         let fill_attrs =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32, 3 => Uint32];
@@ -373,7 +353,7 @@ impl Gpu {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &fill_attrs,
         })];
-        let fill = pipeline(
+        let fill = kit.make(
             "vector fills",
             "fill_vs",
             "fill_fs",
@@ -381,7 +361,7 @@ impl Gpu {
             formats.depth_test(false),
             &targets,
         );
-        let volume_ids = pipeline(
+        let volume_ids = kit.make(
             "vector volume ids",
             "fill_vs",
             "fill_fs",
@@ -391,7 +371,7 @@ impl Gpu {
         );
         let mut no_depth_test = formats.depth_test(false);
         no_depth_test.depth_compare = Some(wgpu::CompareFunction::Always);
-        let line = pipeline(
+        let line = kit.make(
             "vector lines",
             "line_vs",
             "line_fs",

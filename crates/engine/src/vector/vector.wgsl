@@ -20,14 +20,6 @@ struct Frame {
 // cannot textureLoad a depth texture).
 @group(0) @binding(2) var terrain_depth: texture_2d<f32>;
 
-// Styles are sRGB; the colour targets are sRGB formats, which expect linear values.
-fn unpack_colour(c: u32) -> vec4<f32> {
-    let s = unpack4x8unorm(c);
-    let lo = s.rgb / 12.92;
-    let hi = pow((s.rgb + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
-    return vec4<f32>(select(hi, lo, s.rgb <= vec3<f32>(0.04045)), s.a);
-}
-
 // ---- fills ----
 
 struct FillIn {
@@ -54,7 +46,7 @@ fn fill_vs(v: FillIn) -> FillOut {
     if ((v.anchor & DRAPED_BIT) != 0u) {
         clip.z = clip.z * (1.0 + frame.tolerance.x);
     }
-    return FillOut(clip, unpack_colour(v.colour), v.id);
+    return FillOut(clip, srgb_to_linear(v.colour), v.id);
 }
 
 struct Target {
@@ -81,7 +73,7 @@ struct OitOut {
 fn oit_vs(v: FillIn) -> OitOut {
     let eye = anchors[v.anchor & ~DRAPED_BIT].xyz + v.position;
     let clip = frame.clip_from_eye * vec4<f32>(eye, 1.0);
-    return OitOut(clip, unpack_colour(v.colour), length(eye));
+    return OitOut(clip, srgb_to_linear(v.colour), length(eye));
 }
 
 struct OitTargets {
@@ -307,8 +299,8 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     out.sa = sa;
     out.sb = sb;
     out.za_zb_w_o = vec4<f32>(za, zb, v.width_px, v.outline_px);
-    out.colour = unpack_colour(v.colour);
-    out.outline = unpack_colour(v.outline);
+    out.colour = srgb_to_linear(v.colour);
+    out.outline = srgb_to_linear(v.outline);
     out.id = v.id;
     out.icon = v.icon_flags & 0xffffu;
     out.join_a = ja.e_o;
@@ -316,15 +308,6 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     out.reach_along = vec4<f32>(ja.reach, jb.reach, v.along_a, v.along_b);
     out.flags_dash = vec2<u32>(flags, v.dash);
     return out;
-}
-
-// The terrain's depth at a texel, 0 (infinitely far) outside the frame.
-fn terrain_at(t: vec2<i32>) -> f32 {
-    let size = vec2<i32>(textureDimensions(terrain_depth));
-    if (any(t < vec2<i32>(0)) || any(t >= size)) {
-        return 0.0;
-    }
-    return textureLoad(terrain_depth, t, 0).r;
 }
 
 // Distance deciding coverage (coverage = half width + 0.5 - distance) beyond one end of a
@@ -447,12 +430,7 @@ fn line_fs(in: LineOut) -> Target {
     // Hidden where the terrain is in front of the centre line: at all four texels around
     // the centre point (on the surface the line lies on, some are at or behind it).
     let z = mix(in.za_zb_w_o.x, in.za_zb_w_o.y, t);
-    let q = vec2<i32>(floor(centre - vec2<f32>(0.5)));
-    let nearest_far = min(
-        min(terrain_at(q), terrain_at(q + vec2<i32>(1, 0))),
-        min(terrain_at(q + vec2<i32>(0, 1)), terrain_at(q + vec2<i32>(1, 1))),
-    );
-    if (nearest_far > z * (1.0 + frame.tolerance.y)) {
+    if (terrain_farthest_around(centre) > z * (1.0 + frame.tolerance.y)) {
         discard;
     }
     if (in.icon != 0u) {
