@@ -189,7 +189,7 @@ struct ObstacleMap {
 }
 
 /// Up to this many obstacles go in a grid of boxes rather than the table.
-const FEW_OBSTACLES: usize = 1_000;
+const FEW_OBSTACLES: usize = 256;
 
 /// Side of an obstacle cell, pixels.
 const OBSTACLE_CELL_PX: f32 = 4.0;

@@ -315,11 +315,8 @@ fn labels_are_decluttered_at_their_aircraft_and_hidden_behind_the_planet() {
         ..Default::default()
     });
     let mut batch = Batch::default();
-    let mut seed = 7u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = globus_test_support::SplitMix64(7);
+    let mut next = || rng.unit();
     for id in 0..200u64 {
         let (lon, lat) = (2.0 + next() * 12.0, 43.5 + next() * 6.0);
         let mut s = sample(

@@ -1,22 +1,22 @@
 use super::*;
 
-/// A deterministic stream of numbers in 0..1 (SplitMix64).
-struct Rng(u64);
+/// Numbers in 0..1 from a fixed seed.
+struct Rng(globus_test_support::SplitMix64);
 
 impl Rng {
+    fn new(seed: u64) -> Self {
+        Self(globus_test_support::SplitMix64(seed))
+    }
+
     fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        self.0.unit() as f32
     }
 }
 
 const VIEW: [f32; 2] = [1920.0, 1080.0];
 
 fn crowd(n: usize, seed: u64) -> (Vec<LabelRequest>, Vec<[f32; 2]>) {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let mut requests = Vec::new();
     let mut velocities = Vec::new();
     for id in 0..n {
@@ -218,7 +218,7 @@ fn labels_keep_off_obstacles() {
 
 #[test]
 fn the_obstacle_table_never_misses_an_overlap_and_refuses_only_near_ones() {
-    let mut rng = Rng(5);
+    let mut rng = Rng::new(5);
     let obstacles: Vec<[f32; 4]> = (0..3_000)
         .map(|_| {
             let (x, y) = (rng.next() * VIEW[0], rng.next() * VIEW[1]);
