@@ -35,10 +35,10 @@
 //! // Load everything the view needs, draw it (with no overlays) and read it back.
 //! let frame = headless.render_complete(&view, Duration::from_secs(60), &mut [])?;
 //! save_png(&frame.image, "alps.png".as_ref())?;
-//! // What is at the centre of the picture?
-//! if let Some(pick) = headless.globe().pick(640.0, 360.0)? {
-//!     println!("ground at {:?}", pick.surface());
-//! }
+//! // What is at the centre of the picture: an overlay's object, and the ground behind it.
+//! let pick = headless.globe().pick(640.0, 360.0)?;
+//! let ground = pick.and_then(|p| p.surface());
+//! # let _ = ground;
 //! # Ok(()) }
 //! ```
 //!

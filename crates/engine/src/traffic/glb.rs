@@ -13,6 +13,8 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::{Mat4, Vec3};
+
 use super::models::ModelMesh;
 
 /// The largest `.glb` read.
@@ -62,26 +64,6 @@ pub fn read_glb(path: &Path) -> Result<ModelMesh, ModelError> {
     model_from_glb(&bytes, path)
 }
 
-type Mat4 = [[f32; 4]; 4];
-
-fn multiply(a: &Mat4, b: &Mat4) -> Mat4 {
-    let mut m = [[0.0; 4]; 4];
-    for (c, col) in m.iter_mut().enumerate() {
-        for (r, v) in col.iter_mut().enumerate() {
-            *v = (0..4).map(|k| a[k][r] * b[c][k]).sum();
-        }
-    }
-    m
-}
-
-fn transform(m: &Mat4, p: [f32; 3]) -> [f32; 3] {
-    let mut out = [0.0; 3];
-    for (r, o) in out.iter_mut().enumerate() {
-        *o = m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r];
-    }
-    out
-}
-
 /// Reads a model from `.glb` bytes; `name` is what errors call it.
 pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError> {
     let gltf_err = |e: gltf::Error| ModelError::Gltf {
@@ -92,10 +74,7 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
         path: name.to_owned(),
         reason,
     };
-    check_position_accessors(bytes).map_err(|reason| ModelError::Gltf {
-        path: name.to_owned(),
-        reason,
-    })?;
+    check_position_accessors(bytes, name)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(gltf_err)?;
     for buffer in gltf.buffers() {
         if !matches!(buffer.source(), gltf::buffer::Source::Bin) {
@@ -110,23 +89,17 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
         Some(scene) => scene.nodes().collect(),
         None => gltf.nodes().collect(),
     };
-    let identity = [
-        [1.0, 0.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ];
     // glTF (x left, y up, z forward) to the model's (x forward, y left, z up).
     let axes = |p: [f32; 3]| [p[2], p[0], p[1]];
     let mut mesh_out = ModelMesh::default();
     let mut taken = 0usize;
     let mut stack: Vec<(gltf::Node<'_>, Mat4, usize)> =
-        roots.into_iter().map(|n| (n, identity, 0)).collect();
+        roots.into_iter().map(|n| (n, Mat4::IDENTITY, 0)).collect();
     while let Some((node, parent, depth)) = stack.pop() {
         if depth > MAX_DEPTH {
             return Err(content(format!("nodes nest deeper than {MAX_DEPTH}")));
         }
-        let world = multiply(&parent, &node.transform().matrix());
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         for child in node.children() {
             stack.push((child, world, depth + 1));
         }
@@ -166,7 +139,9 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
                     mesh.index()
                 )));
             };
-            let positions: Vec<[f32; 3]> = positions.map(|p| transform(&world, p)).collect();
+            let positions: Vec<[f32; 3]> = positions
+                .map(|p| world.transform_point3(Vec3::from(p)).to_array())
+                .collect();
             if positions.iter().flatten().any(|v| !v.is_finite()) {
                 return Err(content(format!(
                     "mesh {} has a position that is not finite",
@@ -210,7 +185,7 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
 /// `gltf` crate's validation (gltf-json 1.4) indexes that accessor before checking it, and
 /// panics (found by this crate's fuzzer). JSON that does not parse is left to the full
 /// reader, which says why.
-fn check_position_accessors(bytes: &[u8]) -> Result<(), String> {
+fn check_position_accessors(bytes: &[u8], name: &Path) -> Result<(), ModelError> {
     let Ok(glb) = gltf::Glb::from_slice(bytes) else {
         return Ok(());
     };
@@ -224,10 +199,13 @@ fn check_position_accessors(bytes: &[u8]) -> Result<(), String> {
             if let Some(i) = primitive.attributes.get(&position)
                 && i.value() >= accessors
             {
-                return Err(format!(
-                    "mesh {m} primitive {p}: POSITION is accessor {} of {accessors}",
-                    i.value()
-                ));
+                return Err(ModelError::Gltf {
+                    path: name.to_owned(),
+                    reason: format!(
+                        "mesh {m} primitive {p}: POSITION is accessor {} of {accessors}",
+                        i.value()
+                    ),
+                });
             }
         }
     }

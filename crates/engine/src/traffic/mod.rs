@@ -24,7 +24,7 @@ pub mod models;
 
 use std::time::Instant;
 
-use globus_geo::{Cartographic, DVec3, Ellipsoid};
+use globus_geo::{BoundingSphere, Cartographic, DVec3, Ellipsoid, Frustum, Intersection};
 use globus_traffic::fleet::flags;
 use globus_traffic::{Fleet, FleetError, Sampled};
 
@@ -477,10 +477,9 @@ impl TrafficLayer {
                 if self.fleet.id_in_slot(slot as u32).is_none() {
                     continue;
                 }
-                let (_, len) = self.fleet.trail_ring(slot as u32);
+                let (head, len) = self.fleet.trail_ring(slot as u32);
                 if len > 0 {
                     // Re-anchors at this point and encodes the whole ring.
-                    let (head, _) = self.fleet.trail_ring(slot as u32);
                     let newest = slot * n + (head as usize + n - 1) % n;
                     self.encode_point(frame, newest, epoch);
                     encoded += n as u32;
@@ -502,7 +501,10 @@ impl TrafficLayer {
     fn place_aircraft(&mut self, frame: &FrameContext<'_>, epoch: f64) {
         let camera = frame.camera();
         let view = *camera.view();
-        let cone = ViewCone::of(&view);
+        let frustum = Frustum::from_view(&view, camera.near_m());
+        let sees = |centre: DVec3, radius: f64| {
+            frustum.intersect_sphere(&BoundingSphere { centre, radius }) != Intersection::Outside
+        };
         let focal_px = view.height_px as f64 / (2.0 * (view.fov_y_rad * 0.5).tan());
         let ellipsoid = *frame.ellipsoid();
         let capacity = self.fleet.slot_capacity();
@@ -556,10 +558,14 @@ impl TrafficLayer {
             let [heading, pitch, _roll] = sampled.attitudes_deg[r];
             let extent = f64::from(self.extents_m[kind]);
             let distance = (world - view.position).length().max(1e-3);
-            let trail = self.trail_to_draw(slot, head, len, now, trail_s);
+            let trail = if self.style.trails {
+                self.trail_to_draw(slot, head, len, now, trail_s)
+            } else {
+                TrailSpan::default()
+            };
             let trail_reach = f64::from(trail.span_m) + extent;
             let mut trail_bits = 0;
-            if self.style.trails && trail.past > 0 && cone.sees(world, trail_reach) {
+            if trail.past > 0 && sees(world, trail_reach) {
                 // Segments a few pixels long: far trails skip points.
                 let on_screen_px = f64::from(trail.span_m) * focal_px / distance;
                 let wanted = (on_screen_px / TRAIL_SEGMENT_PX).ceil().max(1.0);
@@ -631,7 +637,7 @@ impl TrafficLayer {
             if self.style.models {
                 let true_px = extent * focal_px / distance;
                 if true_px >= 0.75 * f64::from(self.style.symbol_px[kind])
-                    && cone.sees(world, extent * 2.0)
+                    && sees(world, extent * 2.0)
                 {
                     self.instances[kind].push(slot as u32);
                 }
@@ -642,7 +648,6 @@ impl TrafficLayer {
 
     /// Places this frame's labels and builds what the GPU draws of them.
     fn place_labels(&mut self, viewport: [f32; 2]) {
-        let started = Instant::now();
         let now = Instant::now();
         // The first frame shows its labels at once (a still picture must not be caught
         // mid-fade); later ones fade by the time between frames.
@@ -682,7 +687,7 @@ impl TrafficLayer {
         }
         self.stats.labels = l.placed.len() as u32;
         self.stats.labels_wanted = l.requests.len() as u32;
-        self.stats.label_placement_s = started.elapsed().as_secs_f64();
+        self.stats.label_placement_s = now.elapsed().as_secs_f64();
     }
 
     /// The labels drawn in the last frame: each one's aircraft and its box on screen (min x,
@@ -736,42 +741,6 @@ struct TrailSpan {
     first_visible: u32,
     /// Straight distance from it to the newest past point, metres.
     span_m: f32,
-}
-
-/// A cone round the view direction holding the whole frustum: a cheap "may be on screen"
-/// for spheres.
-struct ViewCone {
-    eye: DVec3,
-    forward: DVec3,
-    cos_half: f64,
-}
-
-impl ViewCone {
-    fn of(view: &globus_geo::View) -> Self {
-        let tan_y = (view.fov_y_rad * 0.5).tan();
-        let tan_diag = tan_y * (1.0 + view.aspect() * view.aspect()).sqrt();
-        Self {
-            eye: view.position,
-            forward: view.forward(),
-            cos_half: tan_diag.atan().cos(),
-        }
-    }
-
-    /// Whether a sphere may be in view.
-    fn sees(&self, centre: DVec3, radius: f64) -> bool {
-        let v = centre - self.eye;
-        let d = v.length();
-        if d <= radius {
-            return true;
-        }
-        // The angle off the axis less the sphere's angular radius r is within the cone's half
-        // angle: cos(angle - r) >= cos(half), or the axis passes through the sphere.
-        let along = v.dot(self.forward) / d;
-        let across = (1.0 - along * along).max(0.0).sqrt();
-        let sr = radius / d;
-        let cr = (1.0 - sr * sr).sqrt();
-        along >= cr || along * cr + across * sr >= self.cos_half
-    }
 }
 
 /// The altitude an aircraft is drawn at: on the ground when it says so, never below it

@@ -10,6 +10,7 @@
 //! trapezoid with a thickness), so each is a few hundred triangles: thousands of aircraft
 //! drawn as models stay within a frame.
 
+use glam::Vec3;
 use globus_traffic::AircraftKind;
 
 /// One aircraft shape: triangles with flat normals.
@@ -70,18 +71,12 @@ impl ModelMesh {
     }
 
     fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
-        let u = sub(b, a);
-        let v = sub(c, a);
-        let n = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        if len <= 1e-9 {
+        let (va, vb, vc) = (Vec3::from(a), Vec3::from(b), Vec3::from(c));
+        let n = (vb - va).cross(vc - va);
+        if n.length() <= 1e-9 {
             return;
         }
-        let n = [n[0] / len, n[1] / len, n[2] / len];
+        let n = n.normalize().to_array();
         self.positions.extend([a, b, c]);
         self.normals.extend([n; 3]);
         self.accents.extend([self.accent; 3]);
@@ -193,10 +188,6 @@ impl ModelMesh {
             1,
         );
     }
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// A fuselage of length `length` and radius `r`: rounded nose, straight barrel, tail cone
@@ -367,13 +358,14 @@ mod tests {
             assert!((m.extent_m() - length.max(span)).abs() < length.max(span) * 0.08);
             // Flat normals: unit length, perpendicular to their triangle.
             for (t, n) in m.positions.chunks(3).zip(m.normals.chunks(3)) {
-                let n = n[0];
-                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-                assert!((len - 1.0).abs() < 1e-4);
-                for e in [sub(t[1], t[0]), sub(t[2], t[0])] {
-                    let dot = e[0] * n[0] + e[1] * n[1] + e[2] * n[2];
-                    let el = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
-                    assert!(dot.abs() <= 1e-3 * el.max(1.0), "{kind:?}: {dot}");
+                let n = Vec3::from(n[0]);
+                assert!((n.length() - 1.0).abs() < 1e-4);
+                for e in [
+                    Vec3::from(t[1]) - Vec3::from(t[0]),
+                    Vec3::from(t[2]) - Vec3::from(t[0]),
+                ] {
+                    let dot = e.dot(n);
+                    assert!(dot.abs() <= 1e-3 * e.length().max(1.0), "{kind:?}: {dot}");
                 }
             }
         }
