@@ -81,6 +81,11 @@ pub struct GlobeArgs {
     /// Vertical field of view in degrees.
     #[arg(long = "fov-deg", default_value_t = 60.0)]
     pub fov_deg: f64,
+    /// Orthographic top-down camera (an ATC screen): KM kilometres of ground from the top to
+    /// the bottom of the frame, centred under the camera's LON,LAT with its heading (its
+    /// altitude and pitch do not apply). The viewer's O key switches it on and off.
+    #[arg(long = "ortho-km", allow_negative_numbers = true)]
+    pub ortho_km: Option<f64>,
     /// Vertical error a tile's adaptive mesh may add, as a fraction of the tile's geometric
     /// error (0 draws every sample of the tile grid).
     #[arg(long = "mesh-error", default_value_t = globus_terrain::MeshOptions::default().error_fraction)]
@@ -401,6 +406,11 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
             a.fov_deg
         );
     }
+    if let Some(km) = a.ortho_km
+        && !(0.01..=40_000.0).contains(&km)
+    {
+        bail!("--ortho-km {km} must be from 0.01 to 40000 kilometres");
+    }
     if !(0.0..=4.0).contains(&a.mesh_error) {
         bail!(
             "--mesh-error {} must be a fraction of the tile error from 0 to 4",
@@ -457,6 +467,21 @@ pub fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
         bail!("--size {s:?}: width and height must be 1 to 16384 pixels");
     }
     Ok((w, h))
+}
+
+/// The view of `camera` on `globe` with the field of view and projection of `a`
+/// (orthographic top-down with --ortho-km).
+pub fn camera_view(
+    camera: &CameraSpec,
+    globe: &globus_engine::Globe,
+    a: &GlobeArgs,
+    width: u32,
+    height: u32,
+) -> globus_engine::View {
+    match a.ortho_km {
+        Some(km) => camera.orthographic_view(globe, km * 1e3, a.fov_deg, width, height),
+        None => camera.view(globe, a.fov_deg, width, height),
+    }
 }
 
 /// `LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG`.

@@ -207,6 +207,7 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         globe,
         camera,
         fov_deg: a.globe.fov_deg,
+        ortho_m: a.globe.ortho_km.map(|km| km * 1e3),
         width,
         height,
         exit_after,

@@ -43,7 +43,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     };
     let mut off = Headless::new(&builder, width, height)?;
     let timeout = Duration::from_secs_f64(a.timeout_s);
-    let mut view = camera.view(off.globe(), a.globe.fov_deg, width, height);
+    let mut view = args::camera_view(&camera, off.globe(), &a.globe, width, height);
     let progress = LoadProgress::new();
     let mut show = |r: &FrameReport| progress.show(r);
     let mut frame = {
@@ -53,7 +53,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     // Above the ground of streamed data: the ground is known once the tiles under the
     // camera have loaded, so place the camera again and finish the picture from there.
     for _ in 0..3 {
-        let placed = camera.view(off.globe(), a.globe.fov_deg, width, height);
+        let placed = args::camera_view(&camera, off.globe(), &a.globe, width, height);
         if !camera.above_ground || (placed.position - view.position).length() < 0.1 {
             break;
         }
@@ -121,7 +121,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "gpu_pool_bytes": r.pool.gpu_bytes,
             "adapter": off.gpu().adapter_description(),
             "camera": {"lon": camera.lon_deg, "lat": camera.lat_deg, "alt_m": altitude,
-                        "heading": camera.heading_deg, "pitch": camera.pitch_deg},
+                        "heading": camera.heading_deg,
+                        "pitch": if view.ortho_height_m().is_some() { -90.0 } else { camera.pitch_deg },
+                        "ortho_km": view.ortho_height_m().map(|m| m / 1e3)},
             "size": [width, height],
             "vector": vectors.as_ref().map(|v| {
                 let s = v.stats();

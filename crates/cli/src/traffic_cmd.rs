@@ -222,6 +222,7 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
         globe,
         camera,
         fov_deg: v.globe.fov_deg,
+        ortho_m: v.globe.ortho_km.map(|km| km * 1e3),
         width,
         height,
         exit_after,

@@ -6,6 +6,8 @@
 //! * Right drag: looks around (turns and tilts the camera where it stands).
 //! * Middle drag, or Ctrl + left drag: orbits the ground point under the cursor.
 //! * F: flies to the point under the cursor; Home: flies back to the start.
+//! * O: switches between the perspective camera and the orthographic top-down one (an ATC
+//!   screen: the wheel changes the projection's size, a drag pans, right drag turns it).
 //! * W/A/S/D fly forward/left/back/right, Q/E down/up, at a speed proportional to the height
 //!   above ground; Esc quits.
 //!
@@ -22,8 +24,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, anyhow, bail};
 use globus_engine::{
-    CameraController, CameraSpec, DVec3, Globe, GlobeBuilder, GpuContext, Overlay, VectorLayer,
-    View,
+    CameraController, CameraSpec, DQuat, DVec3, Globe, GlobeBuilder, GpuContext, Overlay,
+    VectorLayer, View,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -40,6 +42,9 @@ pub struct ViewerOptions {
     pub camera: CameraSpec,
     /// Vertical field of view, degrees.
     pub fov_deg: f64,
+    /// Start with the orthographic top-down camera showing this many metres from the top to
+    /// the bottom of the window.
+    pub ortho_m: Option<f64>,
     /// Initial window size.
     pub width: u32,
     /// Initial window size.
@@ -311,9 +316,18 @@ impl State {
         let mut builder = options.globe.clone();
         builder.viewport(config.width, config.height);
         let globe = builder.build(&gpu, format)?;
-        let start = options
-            .camera
-            .view(&globe, options.fov_deg, config.width, config.height);
+        let start = match options.ortho_m {
+            Some(m) => options.camera.orthographic_view(
+                &globe,
+                m,
+                options.fov_deg,
+                config.width,
+                config.height,
+            ),
+            None => options
+                .camera
+                .view(&globe, options.fov_deg, config.width, config.height),
+        };
         Ok(Self {
             window,
             surface,
@@ -360,7 +374,25 @@ impl State {
                     .ellipsoid()
                     .geodetic_normal(view.position)
                     .unwrap_or(globus_engine::DVec3::Z);
-                if let Some(point) = target
+                if let (Some(point), Some(size)) = (target, view.ortho_height_m()) {
+                    // Orthographic: a quarter of the size, centred on the point.
+                    let (w, h) = (f64::from(view.width_px), f64::from(view.height_px));
+                    let centre = self.controller.ground_under(&self.globe, 0.5 * w, 0.5 * h);
+                    if let Some((from, to)) = centre
+                        .and_then(|c| c.try_normalize())
+                        .zip(point.try_normalize())
+                    {
+                        let q = DQuat::from_rotation_arc(from, to);
+                        let to = View {
+                            position: q * view.position,
+                            orientation: (q * view.orientation).normalize(),
+                            ..view
+                        }
+                        .orthographic(size * 0.25);
+                        self.controller
+                            .fly_to(&self.globe, to, Duration::from_secs_f64(FLIGHT_S));
+                    }
+                } else if let Some(point) = target
                     && let Some(eye_dir) = (view.position - point).try_normalize()
                 {
                     let distance = (view.position - point).length() * 0.25;
@@ -394,6 +426,10 @@ impl State {
                 }
             }
             KeyCode::KeyC if self.traffic.is_some() => self.toggle_follow(),
+            KeyCode::KeyO => {
+                let on = !self.controller.is_orthographic();
+                self.controller.set_orthographic(&self.globe, on);
+            }
             KeyCode::Home => {
                 let to = View {
                     width_px: self.config.width,

@@ -112,6 +112,41 @@ fn render_draws_the_swiss_record_at_a_moment_with_every_aircraft_then_in_the_air
     assert_eq!(t["time"], "2018-08-01T14:00:00Z");
     let img = image::open(&png).expect("a PNG").to_rgba8();
     assert_eq!(img.dimensions(), (480, 360));
+
+    // The orthographic top-down camera over the same moment: 400 km of Switzerland from
+    // top to bottom, looking straight down from its eye height whatever --camera says.
+    let out = globus(&[
+        "render",
+        "--camera",
+        "8.2,46.8,450000,0,-30",
+        "--ortho-km",
+        "400",
+        "--size",
+        "480x360",
+        "--traffic",
+        s(&record),
+        "--time",
+        "2018-08-01T14:00:00Z",
+        "--out",
+        s(&png),
+        "--stats",
+        s(&stats),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let st: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("JSON");
+    assert_eq!(st["camera"]["ortho_km"], 400.0);
+    assert_eq!(st["camera"]["pitch"], -90.0);
+    let ortho_drawn = st["traffic"]["aircraft"].as_u64().expect("aircraft") as i64;
+    assert!(
+        (ortho_drawn - expected).abs() <= 1,
+        "drew {ortho_drawn} of {expected}"
+    );
+    assert!(st["traffic"]["labels"].as_u64().expect("labels") > 5);
 }
 
 #[test]
@@ -197,6 +232,15 @@ fn bad_traffic_input_is_one_line() {
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     fails_with_one_line(&args, &["--traffic"]);
     fails_with_one_line(&["traffic"], &["--record"]);
+    for km in ["0", "-5", "1e9", "NaN"] {
+        let args = render(&["--ortho-km", km]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        fails_with_one_line(&args, &["--ortho-km"]);
+    }
+    fails_with_one_line(
+        &["bench", "--soak", "1", "--ortho-km", "10"],
+        &["--ortho-km", "--traffic"],
+    );
     fails_with_one_line(
         &["traffic", "--record", s(&record), "--speed", "0"],
         &["--speed"],

@@ -44,4 +44,32 @@ impl CameraSpec {
             height,
         )
     }
+
+    /// The orthographic top-down view (Kaiser's ATC screen) centred on this camera's
+    /// longitude and latitude with its heading, showing `height_m` metres of ground from the
+    /// top to the bottom of the viewport. The altitude and pitch do not apply: the eye looks
+    /// straight down from [`crate::ORTHO_EYE_HEIGHT_M`] (or 1 km above the
+    /// ground where that is higher).
+    pub fn orthographic_view(
+        &self,
+        globe: &Globe,
+        height_m: f64,
+        fov_y_deg: f64,
+        width: u32,
+        height: u32,
+    ) -> View {
+        let e = globe.ellipsoid();
+        let (lon, lat) = (self.lon_deg.to_radians(), self.lat_deg.to_radians());
+        let eye_m = crate::ORTHO_EYE_HEIGHT_M.max(globe.drawn_ground_m(lon, lat) + 1_000.0);
+        View::from_geodetic(
+            &e,
+            Cartographic::new(lon, lat, eye_m),
+            self.heading_deg.to_radians(),
+            -std::f64::consts::FRAC_PI_2,
+            fov_y_deg.to_radians(),
+            width,
+            height,
+        )
+        .orthographic(height_m)
+    }
 }

@@ -15,6 +15,12 @@
 //!   (never flipping over) and above the ground everywhere.
 //! * **Fly-to**: a smooth flight to a target view over a given duration, rising with the
 //!   distance to cover, ending exactly at the target.
+//! * **Orthographic top-down** (Kaiser 2.4.3 and 5.7.2, the ATC screen):
+//!   [`CameraController::set_orthographic`] looks straight down on the point at the centre
+//!   of the screen with a parallel projection of the same scale there. Zoom then changes the
+//!   projection's size about the cursor, pan moves the eye (the grabbed point stays under the
+//!   cursor, as in perspective), look and orbit only turn about the vertical; the eye stays
+//!   [`ORTHO_EYE_HEIGHT_M`] above the ellipsoid, over anything that flies.
 //!
 //! What the camera stands on comes through [`Ground`], which [`crate::Globe`] implements
 //! with its loaded terrain; tests can implement it with an analytic surface.
@@ -75,6 +81,13 @@ const MAX_DISTANCE_M: f64 = 1.0e8;
 /// Inspection orbits keep the camera between these elevations above the pivot's horizon.
 const MIN_ORBIT_ELEVATION_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 const MAX_ORBIT_ELEVATION_RAD: f64 = 89.5 * std::f64::consts::PI / 180.0;
+/// Height of an orthographic camera's eye above the ellipsoid, metres: above everything
+/// drawn on Earth (the highest ground is 8.8 km, airliners fly below 15 km, balloons below
+/// 50 km), and low enough that depth stays fine over the near side.
+pub const ORTHO_EYE_HEIGHT_M: f64 = 100_000.0;
+/// Smallest and largest orthographic view heights, metres.
+const ORTHO_MIN_HEIGHT_M: f64 = 10.0;
+const ORTHO_MAX_HEIGHT_M: f64 = 4.0e7;
 /// Look-around never tilts closer than this to straight up or down.
 const MAX_LOOK_PITCH_RAD: f64 = 87.5 * std::f64::consts::PI / 180.0;
 
@@ -157,10 +170,10 @@ impl CameraController {
 
     /// The ground point under a pixel (terrain, else the ellipsoid).
     pub fn ground_under(&self, ground: &impl Ground, x_px: f64, y_px: f64) -> Option<DVec3> {
-        let dir = self.view.ray_direction(x_px, y_px);
+        let (origin, dir) = self.view.ray(x_px, y_px);
         ground
-            .ray_pick(self.view.position, dir)
-            .or_else(|| ground.ellipsoid().ray_hit(self.view.position, dir))
+            .ray_pick(origin, dir)
+            .or_else(|| ground.ellipsoid().ray_hit(origin, dir))
     }
 
     /// Grabs the ground under the cursor; false (and nothing grabbed) over the sky.
@@ -188,14 +201,14 @@ impl CameraController {
             height_px: self.view.height_px,
             ..grab.start
         };
-        let dir = start.ray_direction(x_px, y_px);
-        let Some((t, _)) = Ellipsoid::sphere(grab.radius).intersect_ray(start.position, dir) else {
+        let (origin, dir) = start.ray(x_px, y_px);
+        let Some((t, _)) = Ellipsoid::sphere(grab.radius).intersect_ray(origin, dir) else {
             return;
         };
         if t <= 0.0 {
             return;
         }
-        let under_cursor = start.position + dir * t;
+        let under_cursor = origin + dir * t;
         let (Some(from), Some(to)) = (under_cursor.try_normalize(), grab.point.try_normalize())
         else {
             return;
@@ -203,6 +216,7 @@ impl CameraController {
         let q = DQuat::from_rotation_arc(from, to);
         self.view.position = q * start.position;
         self.view.orientation = (q * start.orientation).normalize();
+        self.settle_orthographic_eye(&ground.ellipsoid());
         self.keep_above_ground(ground);
     }
 
@@ -219,6 +233,10 @@ impl CameraController {
             return;
         }
         self.flight = None;
+        if let Some(height_m) = self.view.ortho_height_m() {
+            self.zoom_orthographic(ground, x_px, y_px, notches, height_m);
+            return;
+        }
         let h = self.height_above_ground_m(ground).max(self.clearance_m);
         let dir = self.view.ray_direction(x_px, y_px);
         let target = ground.ray_pick(self.view.position, dir);
@@ -253,8 +271,121 @@ impl CameraController {
         self.view.position = start + dir * allowed;
     }
 
+    /// Orthographic zoom: the projection's size by the same fractions per notch, the point
+    /// under the cursor kept there (the eye turned about the centre to bring it back).
+    fn zoom_orthographic(
+        &mut self,
+        ground: &impl Ground,
+        x_px: f64,
+        y_px: f64,
+        notches: f64,
+        height_m: f64,
+    ) {
+        let factor = if notches > 0.0 {
+            (1.0 - ZOOM_IN_PER_NOTCH).powf(notches.min(5.0))
+        } else {
+            (1.0 + ZOOM_OUT_PER_NOTCH).powf((-notches).min(5.0))
+        };
+        let before = self.ground_under(ground, x_px, y_px);
+        self.view = self
+            .view
+            .orthographic((height_m * factor).clamp(ORTHO_MIN_HEIGHT_M, ORTHO_MAX_HEIGHT_M));
+        let Some(b) = before else {
+            return;
+        };
+        // Where the new ray meets the sphere through the point (as pan does): the turn that
+        // takes it there puts the ray through the point itself.
+        let (origin, dir) = self.view.ray(x_px, y_px);
+        let after = Ellipsoid::sphere(b.length())
+            .intersect_ray(origin, dir)
+            .map(|(t, _)| origin + dir * t);
+        if let Some(a) = after
+            && let (Some(from), Some(to)) = (a.try_normalize(), b.try_normalize())
+        {
+            let q = DQuat::from_rotation_arc(from, to);
+            self.view.position = q * self.view.position;
+            self.view.orientation = (q * self.view.orientation).normalize();
+        }
+        self.settle_orthographic_eye(&ground.ellipsoid());
+    }
+
+    /// Slides an orthographic eye along its view axis (which changes nothing on the screen)
+    /// back to [`ORTHO_EYE_HEIGHT_M`] above the ellipsoid: turns about the centre move it up
+    /// or down with the ellipsoid's flattening.
+    fn settle_orthographic_eye(&mut self, e: &Ellipsoid) {
+        if !self.is_orthographic() {
+            return;
+        }
+        let forward = self.view.forward();
+        for _ in 0..3 {
+            let Some(c) = e.ecef_to_cartographic(self.view.position) else {
+                return;
+            };
+            let up = e.geodetic_normal(self.view.position).unwrap_or(DVec3::Z);
+            let cos = (-forward.dot(up)).max(0.1);
+            self.view.position += forward * ((c.height_m - ORTHO_EYE_HEIGHT_M) / cos);
+        }
+    }
+
+    /// Whether the camera is the orthographic top-down one.
+    pub fn is_orthographic(&self) -> bool {
+        self.view.ortho_height_m().is_some()
+    }
+
+    /// Switches between the perspective camera and the orthographic top-down one (see the
+    /// module documentation), about the ground at the centre of the screen (the point under
+    /// the eye when the centre shows sky), keeping the heading and the scale there. Back in
+    /// perspective the camera looks straight down from the height that shows the same.
+    pub fn set_orthographic(&mut self, ground: &impl Ground, on: bool) {
+        if on == self.is_orthographic() {
+            return;
+        }
+        self.flight = None;
+        self.grab = None;
+        self.orbit = None;
+        let e = ground.ellipsoid();
+        let (w, h) = (
+            f64::from(self.view.width_px),
+            f64::from(self.view.height_px),
+        );
+        let centre = self.ground_under(ground, 0.5 * w, 0.5 * h).or_else(|| {
+            let c = e.ecef_to_cartographic(self.view.position)?;
+            Some(e.cartographic_to_ecef(Cartographic::new(c.lon_rad, c.lat_rad, 0.0)))
+        });
+        let Some(target) = centre.and_then(|p| e.ecef_to_cartographic(p)) else {
+            return;
+        };
+        let heading = self.view.heading_pitch(&e).map_or(0.0, |(h, _)| h);
+        let fov = self.view.fov_y_rad;
+        let tan = (0.5 * fov).tan();
+        let down = -std::f64::consts::FRAC_PI_2;
+        let at = |height_m: f64| Cartographic::new(target.lon_rad, target.lat_rad, height_m);
+        let view = |height_m: f64| {
+            View::from_geodetic(
+                &e,
+                at(height_m),
+                heading,
+                down,
+                fov,
+                self.view.width_px,
+                self.view.height_px,
+            )
+        };
+        let ground_m = ground.drawn_ground_m(target.lon_rad, target.lat_rad);
+        if on {
+            let distance = (self.view.position - e.cartographic_to_ecef(target)).length();
+            let size = (2.0 * tan * distance).clamp(ORTHO_MIN_HEIGHT_M, ORTHO_MAX_HEIGHT_M);
+            self.view = view(ORTHO_EYE_HEIGHT_M.max(ground_m + 1_000.0)).orthographic(size);
+        } else {
+            let size = self.view.ortho_height_m().unwrap_or(1e6);
+            let above = (0.5 * size / tan).max(self.clearance_m);
+            self.view = view(ground_m + above);
+            self.keep_above_ground(ground);
+        }
+    }
+
     /// Turns (`dx_px`) and tilts (`dy_px`) the camera where it stands, by the angle the
-    /// cursor moved across the field of view.
+    /// cursor moved across the field of view (an orthographic camera only turns).
     pub fn look(&mut self, ground: &impl Ground, dx_px: f64, dy_px: f64) {
         self.flight = None;
         let per_px = self.view.fov_y_rad / f64::from(self.view.height_px.max(1));
@@ -267,7 +398,11 @@ impl CameraController {
         let pitch = self.view.forward().dot(up).clamp(-1.0, 1.0).asin();
         let limit = MAX_LOOK_PITCH_RAD;
         // (Never further past the limit than the camera already is.)
-        let tilt = (pitch - dy_px * per_px).clamp((-limit).min(pitch), limit.max(pitch)) - pitch;
+        let tilt = if self.is_orthographic() {
+            0.0
+        } else {
+            (pitch - dy_px * per_px).clamp((-limit).min(pitch), limit.max(pitch)) - pitch
+        };
         let tilt = DQuat::from_axis_angle(self.view.right(), tilt);
         self.view.orientation = (turn * tilt * self.view.orientation).normalize();
     }
@@ -304,6 +439,10 @@ impl CameraController {
         );
         if self.orbit_allowed(ground, &turned, pivot, up) {
             self.view = turned;
+        }
+        if self.is_orthographic() {
+            // Straight down it stays.
+            return;
         }
         // Vertically: the largest part of the rotation that stays within the clamps.
         let angle = -dy_px * radians_per_px;
@@ -417,7 +556,11 @@ impl CameraController {
             return;
         }
         self.flight = None;
-        let speed = self.height_above_ground_m(ground).max(self.clearance_m) * 1.5;
+        // Orthographic: half the view's height per second.
+        let speed = self.view.ortho_height_m().map_or_else(
+            || self.height_above_ground_m(ground).max(self.clearance_m) * 1.5,
+            |h| h * 0.5,
+        );
         let e = ground.ellipsoid();
         let vertical = e.geodetic_normal(self.view.position).unwrap_or(DVec3::Z);
         let ahead = (self.view.forward() - vertical * self.view.forward().dot(vertical))
@@ -490,7 +633,7 @@ fn flight_view(e: &Ellipsoid, f: &Flight, s: f64) -> View {
     dh = (dh + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI;
     let heading = f.from_hp.0 + dh * s;
     let pitch = f.from_hp.1 + (f.to_hp.1 - f.from_hp.1) * s;
-    View::from_geodetic(
+    let view = View::from_geodetic(
         e,
         Cartographic::new(lon, lat, h),
         heading,
@@ -498,5 +641,10 @@ fn flight_view(e: &Ellipsoid, f: &Flight, s: f64) -> View {
         f.from.fov_y_rad + (f.to.fov_y_rad - f.from.fov_y_rad) * s,
         f.from.width_px,
         f.from.height_px,
-    )
+    );
+    // Between orthographic views the projection's size changes geometrically.
+    match (f.from.ortho_height_m(), f.to.ortho_height_m()) {
+        (Some(a), Some(b)) => view.orthographic(a * (b / a).powf(s)),
+        _ => view,
+    }
 }

@@ -401,7 +401,13 @@ impl Globe {
         let ground = self.drawn_ground_m(eye.lon_rad, eye.lat_rad);
         let near_m = near_plane_m((eye.height_m - ground).max(0.0), self.near_cap_m);
         self.selection_options.near_m = near_m;
-        let camera = FrameCamera::new(view, near_m);
+        let camera = match view.ortho_height_m() {
+            None => FrameCamera::new(view, near_m),
+            Some(_) => match ortho_far_m(view, &self.selection_options.occluder) {
+                Some(far_m) => FrameCamera::with_far_m(view, near_m, far_m),
+                None => FrameCamera::new(view, near_m),
+            },
+        };
         self.camera = Some(camera);
         self.renderer.pool_mut().begin_frame();
 
@@ -591,8 +597,7 @@ impl Globe {
             return Ok(None);
         };
         let object = (self.ids_written && read.id != 0).then_some(read.id);
-        let origin = camera.origin();
-        let dir = camera.ray_direction(x_px, y_px);
+        let (origin, dir) = camera.ray(x_px, y_px);
         let from_depth = camera.unproject(x_px, y_px, f64::from(read.depth));
         let surface = match (object, from_depth) {
             // Terrain in front: its depth, refined against the loaded heights.
@@ -753,4 +758,20 @@ fn begin_pass<'e>(
         occlusion_query_set: None,
         multiview_mask: None,
     })
+}
+
+/// The far plane of an orthographic view: just past the deepest point of `lowest` (the body
+/// shrunk to the lowest ground) at the viewport's corners (over a convex body the depth of the
+/// surface seen through a rectangle is greatest at a corner), plus 1 km. `None` when a corner
+/// misses the body: then the whole near side may be in view.
+fn ortho_far_m(view: &View, lowest: &Ellipsoid) -> Option<f64> {
+    let (w, h) = (f64::from(view.width_px), f64::from(view.height_px));
+    let mut far: f64 = 0.0;
+    for (x, y) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+        let (origin, dir) = view.ray(x, y);
+        // The far side of the body is hidden: its entry is what the corner sees.
+        let (entry, _) = lowest.intersect_ray(origin, dir)?;
+        far = far.max(entry);
+    }
+    Some(far + 1_000.0)
 }

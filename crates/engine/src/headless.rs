@@ -167,8 +167,8 @@ pub fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32
     let (mut inside, mut holes) = (0, 0);
     for y in 0..img.height {
         for x in 0..img.width {
-            let dir = view.ray_direction(f64::from(x) + 0.5, f64::from(y) + 0.5);
-            if body.ray_hit(view.position, dir).is_some() {
+            let (origin, dir) = view.ray(f64::from(x) + 0.5, f64::from(y) + 0.5);
+            if body.ray_hit(origin, dir).is_some() {
                 inside += 1;
                 if img.pixels[((y * img.width + x) * 4 + 3) as usize] != 255 {
                     holes += 1;

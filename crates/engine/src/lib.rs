@@ -74,7 +74,7 @@ pub mod vector;
 
 pub use builder::{DEFAULT_REQUEST_LOOKAHEAD_FRAMES, DEFAULT_SEED, GlobeBuilder, MIN_SSE_PX};
 pub use camera_spec::CameraSpec;
-pub use controller::{CameraController, Ground};
+pub use controller::{CameraController, Ground, ORTHO_EYE_HEIGHT_M};
 pub use error::EngineError;
 pub use globe::{FrameReport, Globe, MemoryUse, Pick};
 pub use globus_vector::{Feature, StyleRules};
@@ -84,7 +84,7 @@ pub use query::{TerrainHeight, ray_march};
 pub use traffic::{Follow, TrafficLayer, TrafficStats, TrafficStyle};
 pub use vector::{FeatureId, VectorLayer, VectorStats};
 
-pub use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid, View};
+pub use globus_geo::{Cartographic, DQuat, DVec2, DVec3, Ellipsoid, Projection, View};
 pub use globus_render::{
     DrawStats, FrameCamera, FrameFormats, GpuContext, Lighting, PoolStats, RgbaImage,
 };

@@ -30,3 +30,8 @@ fn terrain_farthest_around(p: vec2<f32>) -> f32 {
         min(terrain_at(q + vec2<i32>(0, 1)), terrain_at(q + vec2<i32>(1, 1))),
     );
 }
+
+// Whether a camera's clip_from_eye is orthographic: its clip w is 1, not the depth.
+fn is_orthographic(clip_from_eye: mat4x4<f32>) -> bool {
+    return clip_from_eye[3].w != 0.0;
+}

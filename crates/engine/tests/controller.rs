@@ -246,3 +246,78 @@ fn a_flight_rises_with_the_distance_and_ends_exactly_at_its_target() {
     assert!(peak < ends + 1_000.0, "a 770 m hop rose to {peak} m");
     assert_eq!(c.view().position, near.position);
 }
+
+#[test]
+fn the_orthographic_camera_keeps_scale_and_centre_zooms_about_the_cursor_and_pans() {
+    // Straight down from 20 km above the hills: the centre of the screen and the scale
+    // there carry over to the orthographic camera, and back.
+    let start = view_at(7.6, 46.0, 20_000.0, 25.0, -90.0);
+    let mut c = CameraController::new(start);
+    let (cx, cy) = (f64::from(W) * 0.5, f64::from(H) * 0.5);
+    let centre = c.ground_under(&Hills, cx, cy).expect("ground");
+    let px_per_m = c
+        .view()
+        .pixels_per_metre((c.view().position - centre).length());
+    c.set_orthographic(&Hills, true);
+    assert!(c.is_orthographic());
+    let size = c.view().ortho_height_m().expect("orthographic");
+    assert!((c.view().pixels_per_metre(1.0) / px_per_m - 1.0).abs() < 1e-9);
+    assert!(
+        (size - 2.0 * 20_000.0 * 30f64.to_radians().tan()).abs() < 1.0,
+        "{size}"
+    );
+    assert!(off_by(&c, centre, cx, cy) < 0.01);
+    let (heading, pitch) = c.view().heading_pitch(&Ellipsoid::WGS84).expect("heading");
+    assert!((heading.to_degrees() - 25.0).abs() < 1e-6 && pitch.to_degrees() < -89.999);
+    let eye = Ellipsoid::WGS84
+        .ecef_to_cartographic(c.view().position)
+        .expect("eye");
+    assert!((eye.height_m - globus_engine::ORTHO_EYE_HEIGHT_M).abs() < 1e-3);
+
+    // Zoom: the projection's size, 0.8x a notch in and 1.25x out, about the cursor; the eye
+    // stays at its height and looks straight down.
+    let (x, y) = (610.0, 140.0);
+    let target = c.ground_under(&Hills, x, y).expect("ground");
+    for _ in 0..10 {
+        c.zoom(&Hills, x, y, 1.0);
+        assert!(off_by(&c, target, x, y) < 0.05, "zoom in moved the point");
+    }
+    let zoomed = c.view().ortho_height_m().expect("orthographic");
+    assert!((zoomed / size - 0.8f64.powi(10)).abs() < 1e-9, "{zoomed}");
+    c.zoom(&Hills, x, y, -1.0);
+    assert!(off_by(&c, target, x, y) < 0.05, "zoom out moved the point");
+    let eye = Ellipsoid::WGS84
+        .ecef_to_cartographic(c.view().position)
+        .expect("eye");
+    assert!((eye.height_m - globus_engine::ORTHO_EYE_HEIGHT_M).abs() < 1.0);
+
+    // Pan: the grabbed point follows the cursor over a loop and the camera comes back.
+    let before = *c.view();
+    let grabbed = c.ground_under(&Hills, 300.0, 300.0).expect("ground");
+    assert!(c.begin_pan(&Hills, 300.0, 300.0));
+    let mut worst: f64 = 0.0;
+    for k in 1..=100 {
+        let a = f64::from(k) / 100.0 * std::f64::consts::TAU;
+        let (px, py) = (300.0 + 200.0 * a.sin(), 300.0 - 100.0 * (1.0 - a.cos()));
+        c.pan_to(&Hills, px, py);
+        worst = worst.max(off_by(&c, grabbed, px, py));
+    }
+    c.end_pan();
+    assert!(worst < 0.5, "the grabbed point strayed {worst:.3} px");
+    assert!((c.view().position - before.position).length() < 1e-3);
+
+    // Looking around only turns: it never tilts off straight down.
+    c.look(&Hills, 40.0, 120.0);
+    let (h2, p2) = c.view().heading_pitch(&Ellipsoid::WGS84).expect("heading");
+    assert!(p2.to_degrees() < -89.999, "tilted to {}", p2.to_degrees());
+    assert!((h2 - heading).abs() > 0.01, "did not turn");
+
+    // Back to perspective: straight down over the same centre at the same scale.
+    let centre = c.ground_under(&Hills, cx, cy).expect("ground");
+    let px_per_m = c.view().pixels_per_metre(1.0);
+    c.set_orthographic(&Hills, false);
+    assert!(!c.is_orthographic());
+    assert!(off_by(&c, centre, cx, cy) < 0.01);
+    let d = (c.view().position - centre).length();
+    assert!((c.view().pixels_per_metre(d) / px_per_m - 1.0).abs() < 1e-3);
+}

@@ -79,6 +79,51 @@ fn planet_disc_from_three_earth_radii_matches_the_analytic_silhouette() {
     assert!(frame.report.draw.draw_calls <= 10);
 }
 
+#[test]
+fn the_orthographic_planet_is_its_exact_silhouette_without_holes() {
+    // Looking straight down on the equator with a parallel projection 14,000 km high: the
+    // WGS84 outline is the ellipse of semi-axes a and b itself, whatever the eye's height.
+    let (w, h) = (640u32, 480u32);
+    let e = Ellipsoid::WGS84;
+    let (a, b) = (e.radii().x, e.radii().z);
+    let size = 14.0e6;
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let view =
+        camera(10.0, 0.0, 0.0, 0.0, -90.0, false).orthographic_view(off.globe(), size, 60.0, w, h);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
+    let dir = globus_test_support::output_dir("rendering");
+    save_png(&frame.image, &dir.join("ortho_planet.png")).expect("save");
+    assert!(frame.complete);
+    let metres_per_px = size / f64::from(h);
+    let expected =
+        std::f64::consts::PI * a * b / (metres_per_px * metres_per_px) / f64::from(w * h);
+    let got = coverage(&frame.image);
+    let rel = (got - expected).abs() / expected;
+    assert!(
+        rel < 0.01,
+        "disc covers {got:.5} of the image, analytic {expected:.5} ({:.2} % off)",
+        rel * 100.0
+    );
+    // Every pixel whose parallel ray meets the body (less the deepest trench) shows ground.
+    let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-11_000.0));
+    assert!(inside > 100_000, "{inside}");
+    assert_eq!(
+        holes, 0,
+        "{holes} of {inside} pixels inside the outline show no terrain"
+    );
+    // At 22 km a pixel, the eight level-1 tiles meet the bound.
+    assert!(
+        frame.report.draw.tiles <= 16,
+        "{:?}",
+        frame.report.selection
+    );
+    // The space round it is dark (the sky is space along parallel rays).
+    let corner = frame.image.get(2, 2);
+    assert!(corner[..3].iter().all(|&c| c < 20), "{corner:?}");
+}
+
 /// Adaptive meshes of every size meet at tile borders of different levels (ocean tiles cut to
 /// a few dozen triangles beside mountain tiles keeping most of their grid): skirts must close
 /// every crack.

@@ -89,11 +89,22 @@ fn symbol_centre(px: &[DVec2]) -> DVec2 {
 fn aircraft_are_drawn_where_their_samples_put_them_within_a_pixel_from_orbit_and_close_in() {
     let (w, h) = (480u32, 360u32);
     let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
-    // Straight down from 2,000 km, from 60 km, and from 25 km above the aircraft's level.
-    for (alt, name) in [(2.0e6, "orbit"), (60_000.0, "high"), (35_000.0, "close")] {
+    // Straight down from 2,000 km, from 60 km, and from 25 km above the aircraft's level;
+    // then the orthographic top-down camera showing 150 km and 20 km.
+    for (alt, ortho_m, name) in [
+        (2.0e6, None, "orbit"),
+        (60_000.0, None, "high"),
+        (35_000.0, None, "close"),
+        (0.0, Some(150_000.0), "ortho-150km"),
+        (0.0, Some(20_000.0), "ortho-20km"),
+    ] {
         // Two aircraft heading north at FL330, a fifth of the view's width either side of
         // its centre, sampled 10 s apart; drawn 3.7 s after the first sample.
-        let dlon = 0.2 * (alt - 10_000.0) / 85_000.0;
+        let dlon = match ortho_m {
+            // 4:3, at 40 degrees north.
+            Some(m) => 0.2 * m * 4.0 / 3.0 / (111_320.0 * 40f64.to_radians().cos()),
+            None => 0.2 * (alt - 10_000.0) / 85_000.0,
+        };
         let (lon_a, lon_b) = (-29.75 - dlon, -29.75 + dlon);
         let dlat = dlon * 0.05;
         let mut layer = TrafficLayer::new();
@@ -107,7 +118,10 @@ fn aircraft_are_drawn_where_their_samples_put_them_within_a_pixel_from_orbit_and
         let lat = 40.0 + dlat * 0.37;
         let alt_a = 10_000.0 + 100.0 * 0.37;
         let spec = common::camera(-29.75, 40.0, alt, 0.0, -90.0, false);
-        let view = spec.view(off.globe(), 60.0, w, h);
+        let view = match ortho_m {
+            Some(m) => spec.orthographic_view(off.globe(), m, 60.0, w, h),
+            None => spec.view(off.globe(), 60.0, w, h),
+        };
         let img = render(&mut off, &view, &mut layer, &format!("fidelity-{name}"));
         for (colour, lon, alt_m) in [(MAGENTA, lon_a, alt_a), (CYAN, lon_b, 10_000.0)] {
             let want = project(off.globe(), lon, lat, alt_m);
@@ -284,6 +298,50 @@ fn a_close_view_draws_the_lit_model_and_a_far_one_the_symbol() {
     assert!(share > 0.005 && share < 0.6, "model covers {share}");
     let (dark, bright) = (lum[lum.len() / 10], lum[lum.len() * 9 / 10]);
     assert!(bright - dark > 60, "flat shading: {dark}..{bright}");
+    // The orthographic top-down camera showing 150 m: the model in plan view at the
+    // projection's scale, 37.6 m nose to tail (2.4 px a metre: 90 px), about its centre.
+    let top = common::camera(8.0, 46.0, 0.0, 0.0, -90.0, false).orthographic_view(
+        off.globe(),
+        150.0,
+        60.0,
+        w,
+        h,
+    );
+    // (Without its label, which would count as model.)
+    let mut style = layer.style().clone();
+    style.labels = false;
+    layer.set_style(style);
+    let img = render(&mut off, &top, &mut layer, "model-ortho");
+    assert_eq!(layer.stats().models, 1, "{:?}", layer.stats());
+    let plain = off
+        .render_complete(&top, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let mut changed = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (p, b) = (img.get(x, y), plain.get(x, y));
+            if (0..3).any(|k| (i32::from(p[k]) - i32::from(b[k])).abs() > 24) {
+                changed.push(DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+            }
+        }
+    }
+    assert!(changed.len() > 500, "{} pixels of model", changed.len());
+    let span = changed
+        .iter()
+        .flat_map(|a| changed.iter().map(move |b| (*a - *b).length()))
+        .fold(0.0, f64::max);
+    let want = 37.6 * f64::from(h) / 150.0;
+    assert!(
+        (span / want - 1.0).abs() < 0.12,
+        "{span} px across, {want} expected"
+    );
+    let c = project(off.globe(), 8.0, 46.0, 9_500.0);
+    let mean = changed.iter().copied().sum::<DVec2>() / changed.len() as f64;
+    assert!(
+        (mean - c).length() < 6.0,
+        "model about {mean}, aircraft at {c}"
+    );
     // The same aircraft from 300 km is a magenta symbol.
     let far = common::camera(8.0, 46.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
     let img = render(&mut off, &far, &mut layer, "model-far");

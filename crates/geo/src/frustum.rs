@@ -2,6 +2,8 @@
 //!
 //! The far plane is at infinity (the renderer uses reversed-Z with an infinite far plane), so
 //! a frustum has five planes: near, left, right, bottom, top. Plane normals point inwards.
+//! An orthographic view's frustum is a box open at the far end: its side planes are parallel
+//! to the view direction.
 
 use glam::DVec3;
 
@@ -57,6 +59,21 @@ pub struct Frustum {
 impl Frustum {
     /// The frustum of `view` with the near plane `near_m` metres in front of the eye.
     pub fn from_view(view: &View, near_m: f64) -> Self {
+        if let Some(height_m) = view.ortho_height_m() {
+            let (hx, hy) = (0.5 * height_m * view.aspect(), 0.5 * height_m);
+            let rot = view.orientation;
+            let eye = view.position;
+            let (right, up, forward) = (rot * DVec3::X, rot * DVec3::Y, rot * DVec3::NEG_Z);
+            return Self {
+                planes: [
+                    Plane::from_point_normal(eye + forward * near_m, forward),
+                    Plane::from_point_normal(eye - right * hx, right),
+                    Plane::from_point_normal(eye + right * hx, -right),
+                    Plane::from_point_normal(eye - up * hy, up),
+                    Plane::from_point_normal(eye + up * hy, -up),
+                ],
+            };
+        }
         let ty = (view.fov_y_rad * 0.5).tan();
         let tx = ty * view.aspect();
         let rot = view.orientation;
@@ -148,6 +165,20 @@ mod tests {
             let dir = v.forward() * deg.to_radians().cos() + v.up() * deg.to_radians().sin();
             assert_eq!(f.contains_point(v.position + dir * 1e4), inside, "{deg}");
         }
+    }
+
+    #[test]
+    fn orthographic_frustum_is_a_box_along_the_view() {
+        let v = view().orthographic(2_000.0);
+        let f = Frustum::from_view(&v, 1.0);
+        // 1920x1080: the box is 3,555.6 m wide and 2,000 m high, at any depth.
+        for depth in [10.0, 1e5, 1e7] {
+            let ahead = v.position + v.forward() * depth;
+            assert!(f.contains_point(ahead + v.right() * 1_770.0 + v.up() * 990.0));
+            assert!(!f.contains_point(ahead + v.right() * 1_785.0));
+            assert!(!f.contains_point(ahead - v.up() * 1_010.0));
+        }
+        assert!(!f.contains_point(v.position + v.forward() * 0.5));
     }
 
     #[test]

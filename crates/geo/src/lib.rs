@@ -4,7 +4,8 @@
 //!   [`Cartographic`] (longitude, latitude, height) and ECEF, geodetic normals, east-north-up
 //!   frames, ray intersection and great-circle distance.
 //! * [`BoundingSphere`] and [`OrientedBox`]: bounding volumes of tiles.
-//! * [`View`] and [`Frustum`]: a camera in f64 ECEF and the planes of what it sees.
+//! * [`View`] and [`Frustum`]: a camera in f64 ECEF (perspective or orthographic) and the
+//!   planes of what it sees.
 //! * [`EllipsoidalOccluder`]: horizon culling (Cesium's ellipsoid-scaled occluder point).
 //!
 //! Everything is in metres and radians, f64, in Earth-centred Earth-fixed (ECEF) coordinates
@@ -23,4 +24,4 @@ pub use ellipsoid::{Ellipsoid, EnuFrame};
 pub use frustum::{Frustum, Intersection, Plane};
 pub use glam::{DMat3, DMat4, DQuat, DVec2, DVec3, DVec4};
 pub use horizon::EllipsoidalOccluder;
-pub use view::View;
+pub use view::{Projection, View};

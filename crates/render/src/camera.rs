@@ -7,6 +7,10 @@
 //! drawn through this camera jitters, at 1 m above the ground or anywhere else.
 //! The projection maps view depth `z` (negative in front) to `near / -z`: 1 at the near
 //! plane, approaching 0 at infinity, which spreads f32 depth precision evenly in log space.
+//! An orthographic view ([`globus_geo::Projection::Orthographic`]) cannot divide by the depth:
+//! its depth is linear, `(far - d) / (far - near)` (still 1 at the near plane and nearer is
+//! greater), over a far plane the caller sets as tight as it can ([`FrameCamera::with_far_m`]),
+//! and its clip `w` is 1.
 //!
 //! ```text
 //!  world (f64 ECEF) ──(− origin, f64, then f32)──> eye-relative ──view──> camera ──proj──> clip
@@ -20,19 +24,65 @@ use globus_geo::View;
 pub struct FrameCamera {
     view: View,
     near_m: f64,
+    /// Far plane of an orthographic view, metres (infinite for a perspective).
+    far_m: f64,
     /// Projection * camera-from-world rotation, f64.
     clip_from_eye: DMat4,
 }
 
 impl FrameCamera {
-    /// The camera of `view` with the near plane at `near_m` metres.
+    /// The camera of `view` with the near plane at `near_m` metres. An orthographic view
+    /// gets its far plane past the plane through the world's origin (a body's centre) square
+    /// to the view, by 2 % of the eye's distance from it: all of a body's near side the view
+    /// looks at. [`FrameCamera::with_far_m`] sets a tighter one.
     pub fn new(view: &View, near_m: f64) -> Self {
+        let centre_depth = -view.position.dot(view.forward());
+        let far_m = centre_depth.max(0.0) + 0.02 * view.position.length() + near_m + 1.0;
+        Self::with_far_m(view, near_m, far_m)
+    }
+
+    /// The camera of `view` with the near plane at `near_m` and, for an orthographic view,
+    /// the far plane at `far_m` metres (its depth resolution is about `far_m * 6e-8`;
+    /// nothing beyond it is drawn). A perspective's far plane is always at infinity.
+    pub fn with_far_m(view: &View, near_m: f64, far_m: f64) -> Self {
         let camera_from_world = DMat4::from_quat(view.orientation.inverse());
+        let far_m = if view.ortho_height_m().is_some() {
+            far_m.max(near_m * 2.0 + 1.0)
+        } else {
+            f64::INFINITY
+        };
         Self {
             view: *view,
             near_m,
-            clip_from_eye: projection(view, near_m) * camera_from_world,
+            far_m,
+            clip_from_eye: projection(view, near_m, far_m) * camera_from_world,
         }
+    }
+
+    /// Whether the projection is orthographic (depth linear between the near and far planes).
+    pub fn is_orthographic(&self) -> bool {
+        self.view.ortho_height_m().is_some()
+    }
+
+    /// The far plane, metres: infinite for a perspective.
+    pub fn far_m(&self) -> f64 {
+        self.far_m
+    }
+
+    /// The depth-buffer value (reversed-Z) of something `distance_m` in front of the eye
+    /// along the view axis.
+    pub fn depth_at(&self, distance_m: f64) -> f64 {
+        if self.is_orthographic() {
+            (self.far_m - distance_m) / (self.far_m - self.near_m)
+        } else {
+            self.near_m / distance_m
+        }
+    }
+
+    /// How many pixels one metre across the view spans `distance_m` in front of the eye
+    /// ([`View::pixels_per_metre`]).
+    pub fn pixels_per_metre(&self, distance_m: f64) -> f64 {
+        self.view.pixels_per_metre(distance_m)
     }
 
     /// The view it was made from (eye, orientation, field of view, viewport).
@@ -70,7 +120,7 @@ impl FrameCamera {
     /// The projection: reversed-Z (1 at the near plane), infinite far plane, for a 32-bit
     /// float depth buffer compared with `Greater`.
     pub fn projection_matrix(&self) -> Mat4 {
-        projection(&self.view, self.near_m).as_mat4()
+        projection(&self.view, self.near_m, self.far_m).as_mat4()
     }
 
     /// Projection times view: eye-relative offsets (ECEF axes) to clip space. What the
@@ -117,23 +167,44 @@ impl FrameCamera {
         self.view.ray_direction(x_px, y_px)
     }
 
+    /// The ray through a pixel position: origin and unit direction ([`View::ray`]).
+    pub fn ray(&self, x_px: f64, y_px: f64) -> (DVec3, DVec3) {
+        self.view.ray(x_px, y_px)
+    }
+
     /// The world point at pixel (`x_px`, `y_px`) whose reversed-Z depth is `depth` (as read
-    /// from the depth buffer). `None` for depth 0 (nothing drawn there: infinitely far).
+    /// from the depth buffer). `None` for depth 0 (nothing drawn there: infinitely far, or
+    /// at an orthographic view's far plane).
     pub fn unproject(&self, x_px: f64, y_px: f64, depth: f64) -> Option<DVec3> {
         if depth.is_nan() || depth <= 0.0 {
             return None;
         }
+        let (origin, dir) = self.ray(x_px, y_px);
+        if self.is_orthographic() {
+            let along_axis = self.far_m - depth * (self.far_m - self.near_m);
+            return Some(origin + dir * along_axis);
+        }
         // depth = near / distance along the view axis.
         let along_axis = self.near_m / depth;
-        let dir = self.ray_direction(x_px, y_px);
         let cos = dir.dot(self.view.forward());
-        (cos > 0.0).then(|| self.view.position + dir * (along_axis / cos))
+        (cos > 0.0).then(|| origin + dir * (along_axis / cos))
     }
 }
 
-fn projection(view: &View, near_m: f64) -> DMat4 {
-    let f = 1.0 / (view.fov_y_rad * 0.5).tan();
+fn projection(view: &View, near_m: f64, far_m: f64) -> DMat4 {
     let aspect = view.aspect();
+    if let Some(height_m) = view.ortho_height_m() {
+        // x, y: the visible rectangle to -1..1; z: 1 at the near plane, 0 at the far one.
+        let (sx, sy) = (2.0 / (height_m * aspect), 2.0 / height_m);
+        let range = far_m - near_m;
+        return DMat4::from_cols(
+            DVec4::new(sx, 0.0, 0.0, 0.0),
+            DVec4::new(0.0, sy, 0.0, 0.0),
+            DVec4::new(0.0, 0.0, 1.0 / range, 0.0),
+            DVec4::new(0.0, 0.0, far_m / range, 1.0),
+        );
+    }
+    let f = 1.0 / (view.fov_y_rad * 0.5).tan();
     DMat4::from_cols(
         DVec4::new(f / aspect, 0.0, 0.0, 0.0),
         DVec4::new(0.0, f, 0.0, 0.0),
@@ -219,5 +290,52 @@ mod tests {
         // Behind the eye: not drawn.
         assert!(camera.project(view.position - view.forward()).is_none());
         assert!(camera.unproject(1.0, 1.0, 0.0).is_none());
+    }
+
+    #[test]
+    fn orthographic_depth_is_linear_and_unprojects() {
+        let view = View::from_geodetic(
+            &Ellipsoid::WGS84,
+            Cartographic::from_degrees(8.5, 47.4, 50_000.0),
+            0.2,
+            -std::f64::consts::FRAC_PI_2,
+            1.0,
+            800,
+            600,
+        )
+        .orthographic(40_000.0);
+        let camera = FrameCamera::with_far_m(&view, 1.0, 80_001.0);
+        assert!(camera.is_orthographic());
+        assert!((camera.depth_at(1.0) - 1.0).abs() < 1e-12);
+        assert!(camera.depth_at(80_001.0).abs() < 1e-12);
+        for (x, y, d) in [
+            (0.5, 0.5, 2.0),
+            (400.0, 300.0, 50_000.0),
+            (799.5, 10.0, 79_000.0),
+        ] {
+            let (origin, dir) = view.ray(x, y);
+            let world = origin + dir * d;
+            let (px, depth) = camera.project_with_depth(world).expect("in front");
+            assert!((px.x - x).abs() < 1e-6 && (px.y - y).abs() < 1e-6, "{px}");
+            assert!((depth - camera.depth_at(d)).abs() < 1e-12, "{depth}");
+            let back = camera.unproject(x, y, depth).expect("depth > 0");
+            assert!((back - world).length() < 1e-6, "{back} vs {world}");
+        }
+        // The shaders' f32 matrix agrees: the pixel does not move with depth.
+        let m = camera.clip_from_eye();
+        let (origin, dir) = view.ray(600.0, 150.0);
+        for d in [10.0f64, 60_000.0] {
+            let p = (origin + dir * d - view.position).as_vec3();
+            let c = m * Vec4::new(p.x, p.y, p.z, 1.0);
+            assert!((c.w - 1.0).abs() < 1e-6);
+            assert!((c.x - 0.5).abs() < 1e-5 && (c.y - 0.5).abs() < 1e-5, "{c}");
+        }
+        // The default far plane holds the near side of the Earth.
+        let wide = FrameCamera::new(&view.orthographic(1.2e7), 1.0);
+        assert!(
+            wide.far_m() > 6.4e6 && wide.far_m() < 6.7e6,
+            "{}",
+            wide.far_m()
+        );
     }
 }

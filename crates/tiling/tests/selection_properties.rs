@@ -1,4 +1,5 @@
-//! Selection invariants over random cameras (property tests with an in-memory oracle).
+//! Selection invariants over random cameras, perspective and orthographic (property tests
+//! with an in-memory oracle).
 
 use std::collections::HashSet;
 
@@ -16,6 +17,9 @@ struct Camera {
     pitch: f64,
     width: u32,
     height: u32,
+    /// An orthographic top-down view this many metres high (looking straight down from
+    /// `alt`, whatever `pitch` says).
+    ortho_m: Option<f64>,
 }
 
 fn camera() -> impl Strategy<Value = Camera> {
@@ -26,9 +30,10 @@ fn camera() -> impl Strategy<Value = Camera> {
         -180.0f64..180.0,
         -90.0f64..30.0,
         (64u32..400, 64u32..300),
+        prop::option::weighted(0.25, 1.0f64..7.3),
     )
         .prop_map(
-            |(lon, lat, log_alt, heading, pitch, (width, height))| Camera {
+            |(lon, lat, log_alt, heading, pitch, (width, height), log_ortho)| Camera {
                 lon,
                 lat,
                 alt: 10f64.powf(log_alt),
@@ -36,20 +41,27 @@ fn camera() -> impl Strategy<Value = Camera> {
                 pitch,
                 width,
                 height,
+                ortho_m: log_ortho.map(|l| 10f64.powf(l)),
             },
         )
 }
 
 fn view_of(c: &Camera) -> View {
-    View::from_geodetic(
-        &Ellipsoid::WGS84,
-        Cartographic::from_degrees(c.lon, c.lat, c.alt),
-        c.heading.to_radians(),
-        c.pitch.to_radians(),
-        60f64.to_radians(),
-        c.width,
-        c.height,
-    )
+    let view = |pitch: f64| {
+        View::from_geodetic(
+            &Ellipsoid::WGS84,
+            Cartographic::from_degrees(c.lon, c.lat, c.alt),
+            c.heading.to_radians(),
+            pitch.to_radians(),
+            60f64.to_radians(),
+            c.width,
+            c.height,
+        )
+    };
+    match c.ortho_m {
+        Some(m) => view(-90.0).orthographic(m),
+        None => view(c.pitch),
+    }
 }
 
 fn oracle(scheme: TilingScheme, load: LoadRule) -> MemoryOracle {
@@ -68,8 +80,8 @@ fn visible_surface_points(view: &View) -> Vec<(f64, f64)> {
         for i in 0..16 {
             let x = (f64::from(i) + 0.5) / 16.0 * f64::from(view.width_px);
             let y = (f64::from(j) + 0.5) / 12.0 * f64::from(view.height_px);
-            let dir = view.ray_direction(x, y);
-            if let Some(hit) = e.ray_hit(view.position, dir)
+            let (origin, dir) = view.ray(x, y);
+            if let Some(hit) = e.ray_hit(origin, dir)
                 && let Some(c) = e.ecef_to_cartographic(hit)
             {
                 pts.push((c.lon_rad, c.lat_rad));
@@ -205,6 +217,7 @@ fn unloaded_roots_are_requested_first() {
         pitch: -90.0,
         width: 800,
         height: 600,
+        ortho_m: None,
     };
     let sel = select(&view_of(&far), &o, &SelectionOptions::default());
     // From 20,000 km the level-0 tiles are far too coarse: their children are wanted.
@@ -224,6 +237,7 @@ fn no_data_stops_refinement_and_keeps_the_ancestor() {
         pitch: -90.0,
         width: 640,
         height: 480,
+        ortho_m: None,
     };
     let view = view_of(&near_alps);
     let full = select(&view, &o, &SelectionOptions::default());
@@ -239,4 +253,46 @@ fn no_data_stops_refinement_and_keeps_the_ancestor() {
         "the ancestor covers the no-data area"
     );
     assert!(sel.requests.is_empty());
+}
+
+#[test]
+fn an_orthographic_view_selects_by_its_scale_not_by_the_eye_height() {
+    // The same 200 km orthographic view from 20 km and from 2,000 km above the ground: the
+    // picture is the same, so is the cut, and its finest tiles meet the bound at that scale.
+    let o = oracle(TilingScheme::Geographic, LoadRule::All);
+    let at = |alt: f64| Camera {
+        lon: 7.6,
+        lat: 46.0,
+        alt,
+        heading: 30.0,
+        pitch: -90.0,
+        width: 800,
+        height: 600,
+        ortho_m: Some(200_000.0),
+    };
+    let options = SelectionOptions::default();
+    let low = select(&view_of(&at(20_000.0)), &o, &options);
+    let high = select(&view_of(&at(2.0e6)), &o, &options);
+    let keys = |s: &globus_tiling::Selection| {
+        let mut k: Vec<TileKey> = s.draw.iter().map(|d| d.key).collect();
+        k.sort();
+        k
+    };
+    assert_eq!(keys(&low), keys(&high));
+    assert!(!low.draw.is_empty());
+    for d in &low.draw {
+        assert!(
+            d.sse_px <= options.max_sse_px,
+            "{:?}: {} px",
+            d.key,
+            d.sse_px
+        );
+    }
+    // One scale everywhere: the cut spans few levels (the test oracle's errors vary by half).
+    let levels = |s: &globus_tiling::Selection| {
+        let l = s.draw.iter().map(|d| d.key.level());
+        (l.clone().min().unwrap_or(0), l.max().unwrap_or(0))
+    };
+    let (lo, hi) = levels(&low);
+    assert!(hi - lo <= 2, "orthographic cut spans levels {lo}..{hi}");
 }

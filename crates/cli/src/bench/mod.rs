@@ -17,6 +17,11 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if !(a.fps > 0.0 && a.fps <= 1000.0) {
         bail!("--fps {} must be above 0 and at most 1000", a.fps);
     }
+    if a.globe.ortho_km.is_some() && a.traffic.is_none() {
+        bail!(
+            "--ortho-km applies to bench --traffic only (paths, jumps and soaks fly perspective cameras)"
+        );
+    }
     if let (Some(from), Some(to)) = (&a.from, &a.to) {
         return jump::run(&a, &builder, from, to, (width, height));
     }

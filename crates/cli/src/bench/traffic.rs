@@ -48,7 +48,7 @@ pub fn run(
         None => traffic_cmd::default_camera(&scene.replay),
     };
     let mut off = Headless::new(builder, width, height)?;
-    let view = camera.view(off.globe(), a.globe.fov_deg, width, height);
+    let view = args::camera_view(&camera, off.globe(), &a.globe, width, height);
     // The terrain complete first, then one frame with the traffic (pipelines are made in the
     // first), so the figures time the replay alone.
     off.render_complete(&view, Duration::from_secs(120), &mut [])?;

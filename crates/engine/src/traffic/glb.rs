@@ -74,6 +74,7 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
         path: name.to_owned(),
         reason,
     };
+    check_glb_length(bytes, name)?;
     check_position_accessors(bytes, name)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(gltf_err)?;
     for buffer in gltf.buffers() {
@@ -185,6 +186,31 @@ pub fn model_from_glb(bytes: &[u8], name: &Path) -> Result<ModelMesh, ModelError
 /// `gltf` crate's validation (gltf-json 1.4) indexes that accessor before checking it, and
 /// panics (found by this crate's fuzzer). JSON that does not parse is left to the full
 /// reader, which says why.
+/// The length a GLB header declares must hold the header and a chunk header and fit in the
+/// file: the `gltf` crate (1.4) subtracts the header's size from it unchecked.
+fn check_glb_length(bytes: &[u8], name: &Path) -> Result<(), ModelError> {
+    let Some((b"glTF", rest)) = bytes.split_first_chunk::<4>() else {
+        return Ok(());
+    };
+    let Some(length) = rest
+        .get(4..8)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .map(u32::from_le_bytes)
+    else {
+        return Ok(());
+    };
+    if (20..=bytes.len() as u64).contains(&u64::from(length)) {
+        return Ok(());
+    }
+    Err(ModelError::Gltf {
+        path: name.to_owned(),
+        reason: format!(
+            "the header declares {length} bytes, the file has {}",
+            bytes.len()
+        ),
+    })
+}
+
 fn check_position_accessors(bytes: &[u8], name: &Path) -> Result<(), ModelError> {
     let Ok(glb) = gltf::Glb::from_slice(bytes) else {
         return Ok(());

@@ -505,7 +505,6 @@ impl TrafficLayer {
         let sees = |centre: DVec3, radius: f64| {
             frustum.intersect_sphere(&BoundingSphere { centre, radius }) != Intersection::Outside
         };
-        let focal_px = view.height_px as f64 / (2.0 * (view.fov_y_rad * 0.5).tan());
         let ellipsoid = *frame.ellipsoid();
         let capacity = self.fleet.slot_capacity();
         let n = self.fleet.options().trail_points;
@@ -527,7 +526,7 @@ impl TrafficLayer {
         self.labels.request_slots.clear();
         self.labels.symbols.clear();
         self.labels.blocks.resize_with(capacity, LaidOut::default);
-        let occluder = EllipsoidalOccluder::new(&ellipsoid, view.position);
+        let occluder = EllipsoidalOccluder::new(&ellipsoid, view.occlusion_eye());
         let sampled = std::mem::take(&mut self.sampled);
         for r in 0..sampled.len() {
             let slot = sampled.slots[r] as usize;
@@ -558,6 +557,7 @@ impl TrafficLayer {
             let [heading, pitch, _roll] = sampled.attitudes_deg[r];
             let extent = f64::from(self.extents_m[kind]);
             let distance = (world - view.position).length().max(1e-3);
+            let px_per_m = view.pixels_per_metre(distance);
             let trail = if self.style.trails {
                 self.trail_to_draw(slot, head, len, now, trail_s)
             } else {
@@ -567,7 +567,7 @@ impl TrafficLayer {
             let mut trail_bits = 0;
             if trail.past > 0 && sees(world, trail_reach) {
                 // Segments a few pixels long: far trails skip points.
-                let on_screen_px = f64::from(trail.span_m) * focal_px / distance;
+                let on_screen_px = f64::from(trail.span_m) * px_per_m;
                 let wanted = (on_screen_px / TRAIL_SEGMENT_PX).ceil().max(1.0);
                 let points = f64::from(trail.past - trail.first_visible);
                 let stride = (points / wanted).ceil().clamp(1.0, f64::from(n as u32)) as u32;
@@ -629,13 +629,13 @@ impl TrafficLayer {
                     priority: if selected {
                         f32::MAX
                     } else {
-                        (extent / distance) as f32
+                        (extent * px_per_m) as f32
                     },
                 });
                 self.labels.request_slots.push((slot as u32, depth as f32));
             }
             if self.style.models {
-                let true_px = extent * focal_px / distance;
+                let true_px = extent * px_per_m;
                 if true_px >= 0.75 * f64::from(self.style.symbol_px[kind])
                     && sees(world, extent * 2.0)
                 {
@@ -776,11 +776,23 @@ impl Follow {
         self.id
     }
 
-    /// Moves `view` with the aircraft; `false` once it has left the fleet.
+    /// Moves `view` with the aircraft; `false` once it has left the fleet. A perspective
+    /// view moves by the aircraft's displacement; an orthographic one turns about the body's
+    /// centre by the aircraft's change of direction from it, so it stays top-down at its
+    /// height while the aircraft climbs or crosses the planet.
     pub fn update(&mut self, layer: &TrafficLayer, view: &mut globus_geo::View) -> bool {
         let Some(now) = layer.position_now(self.id) else {
             return false;
         };
+        if view.ortho_height_m().is_some() {
+            if let (Some(from), Some(to)) = (self.last.try_normalize(), now.try_normalize()) {
+                let q = globus_geo::DQuat::from_rotation_arc(from, to);
+                view.position = q * view.position;
+                view.orientation = (q * view.orientation).normalize();
+            }
+            self.last = now;
+            return true;
+        }
         view.position += now - self.last;
         self.last = now;
         true
@@ -895,7 +907,9 @@ impl Overlay for TrafficLayer {
         let camera = frame.camera();
         let (w, h) = camera.viewport_px();
         let (w, h) = (w.max(1) as f32, h.max(1) as f32);
-        let focal_px = h / (2.0 * (camera.view().fov_y_rad as f32 * 0.5).tan());
+        // Perspective: the focal length (pixels per metre at 1 m); orthographic: pixels per
+        // metre everywhere.
+        let focal_px = camera.pixels_per_metre(1.0) as f32;
         let sun = frame.sun_direction().as_vec3();
         let mut kinds = [[0f32; 4]; 4];
         for (k, row) in kinds.iter_mut().enumerate() {

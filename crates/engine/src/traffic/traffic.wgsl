@@ -8,7 +8,7 @@ struct Frame {
     clip_from_eye: mat4x4<f32>,
     // Width, height, 1 / width, 1 / height (pixels).
     viewport: vec4<f32>,
-    // x: focal length (pixels), y: now (seconds since the layer's epoch), z: trail length
+    // x: focal length (pixels; pixels per metre when orthographic), y: now (seconds since the layer's epoch), z: trail length
     // (seconds), w: how much nearer than its depth a symbol may be behind terrain (fraction).
     params: vec4<f32>,
     // Towards the sun (ECEF axes), w: ambient light.
@@ -86,7 +86,12 @@ fn from_pixels(px: vec2<f32>, like: vec4<f32>) -> vec4<f32> {
 
 // An aircraft's size on screen at its true dimensions, pixels.
 fn true_px(a: Aircraft) -> f32 {
-    return frame.kinds[kind_of(a)].y * frame.params.x / max(length(a.position), 1e-3);
+    let per_m = select(
+        frame.params.x / max(length(a.position), 1e-3),
+        frame.params.x,
+        is_orthographic(frame.clip_from_eye),
+    );
+    return frame.kinds[kind_of(a)].y * per_m;
 }
 
 // How much of the symbol shows (1 far away, 0 once the model is large enough).

@@ -28,14 +28,14 @@ fn decode_oct(packed: u32) -> vec3<f32> {
     return normalize(n);
 }
 
-// Distance along a unit ray from the eye to where it enters (x) and leaves (y) the sphere of
-// radius planet radius + `shell_m`, computed from the eye height so that no large number is
-// squared in f32. Returns y < x when the ray misses.
-fn shell_span(dir: vec3<f32>, shell_m: f32) -> vec2<f32> {
+// Distance along a unit ray from a point `h` above the planet's sphere in the direction `up`
+// from its centre to where the ray enters (x) and leaves (y) the sphere of radius planet
+// radius + `shell_m`, computed from the height so that no large number is squared in f32.
+// Returns y < x when the ray misses.
+fn shell_span_from(up: vec3<f32>, h: f32, dir: vec3<f32>, shell_m: f32) -> vec2<f32> {
     let r0 = frame.planet.x;
-    let h = frame.eye_up_height.w;
     let r = r0 + h;
-    let b = r * dot(dir, frame.eye_up_height.xyz);
+    let b = r * dot(dir, up);
     // r^2 - (r0 + shell)^2 = (h - shell) (2 r0 + h + shell)
     let c = (h - shell_m) * (2.0 * r0 + h + shell_m);
     let disc = b * b - c;
@@ -44,6 +44,18 @@ fn shell_span(dir: vec3<f32>, shell_m: f32) -> vec2<f32> {
     }
     let s = sqrt(disc);
     return vec2<f32>(-b - s, -b + s);
+}
+
+// Whether the frame's camera is orthographic (its clip w is 1, not the depth).
+fn is_ortho() -> bool {
+    return frame.clip_from_eye[3].w != 0.0;
+}
+
+// The unit view direction of an orthographic camera (all its rays are parallel to it).
+fn ortho_forward() -> vec3<f32> {
+    let near = frame.eye_from_clip * vec4<f32>(0.0, 0.0, 1.0, 1.0);
+    let far = frame.eye_from_clip * vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    return normalize(far.xyz - near.xyz);
 }
 
 // Vertical optical depth of the whole atmosphere per colour channel (Rayleigh scattering is
@@ -56,16 +68,17 @@ struct Air {
     transmittance: vec3<f32>,
 }
 
-// The air between the eye and a point `dist` away along a unit ray (or the whole sky when
-// `dist` is huge). The atmosphere is a uniform shell `planet.y` thick, lit by the sun at the
-// middle of the path; `planet.z` scales the scattered light relative to the sunlit ground.
-fn air(dir: vec3<f32>, dist: f32) -> Air {
+// The air between a point `h` above the planet's sphere (direction `up` from its centre) and
+// a point `dist` away along a unit ray (or the whole sky when `dist` is huge). The atmosphere
+// is a uniform shell `planet.y` thick, lit by the sun at the middle of the path; `planet.z`
+// scales the scattered light relative to the sunlit ground.
+fn air_from(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32) -> Air {
     let thickness = frame.planet.y;
-    let span = shell_span(dir, thickness);
+    let span = shell_span_from(up, h, dir, thickness);
     if (span.y <= 0.0 || span.y < span.x) {
         return Air(vec3<f32>(0.0), vec3<f32>(1.0));
     }
-    let ground = shell_span(dir, 0.0);
+    let ground = shell_span_from(up, h, dir, 0.0);
     var far = min(span.y, dist);
     if (ground.y >= ground.x && ground.x > 0.0) {
         far = min(far, ground.x);
@@ -74,13 +87,30 @@ fn air(dir: vec3<f32>, dist: f32) -> Air {
     let path = max(far - near, 0.0);
     let depth = VERTICAL_DEPTH * (path / thickness);
     let transmittance = exp(-depth);
-    let mid = frame.eye_up_height.xyz * (frame.planet.x + frame.eye_up_height.w) + dir * (0.5 * (near + far));
+    let mid = up * (frame.planet.x + h) + dir * (0.5 * (near + far));
     let sun_height = dot(normalize(mid), frame.sun.xyz);
     let day = smoothstep(-0.2, 0.25, sun_height);
     // Low sun: the light reaching the air has itself crossed much air and lost its blue.
     let sun_colour = mix(vec3<f32>(1.0, 0.55, 0.3), vec3<f32>(1.0), smoothstep(0.0, 0.35, sun_height));
     let inscatter = (vec3<f32>(1.0) - transmittance) * sun_colour * (frame.planet.z * (0.03 + 0.97 * day));
     return Air(inscatter, transmittance);
+}
+
+// The air between the eye and a point `dist` away along a unit ray.
+fn air(dir: vec3<f32>, dist: f32) -> Air {
+    return air_from(frame.eye_up_height.xyz, frame.eye_up_height.w, dir, dist);
+}
+
+// The air along an orthographic camera's ray to a point at `eye_offset` from the eye: from
+// where the ray leaves the eye's plane, along the view.
+fn air_ortho(eye_offset: vec3<f32>) -> Air {
+    let f = ortho_forward();
+    let along = dot(eye_offset, f);
+    // The ray's start relative to the body's centre (the eye is planet radius + height
+    // along its up; the rest is small next to that).
+    let start = frame.eye_up_height.xyz * (frame.planet.x + frame.eye_up_height.w) + (eye_offset - f * along);
+    let r = length(start);
+    return air_from(start / r, r - frame.planet.x, f, along);
 }
 
 // Filmic-ish tone curve so bright sunlit snow does not clip hard.

@@ -54,13 +54,22 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let ambient = frame.sun.w;
     let diffuse = max(dot(n, sun), 0.0);
     let dist = length(in.eye_offset);
-    let view = -in.eye_offset / max(dist, 1e-6);
+    // Towards the eye (an orthographic camera's rays are parallel: against its view).
+    var view = -in.eye_offset / max(dist, 1e-6);
+    if (is_ortho()) {
+        view = -ortho_forward();
+    }
     // Sun glint on water (Blinn-Phong).
     let h = normalize(sun + view);
     let glint = water * pow(max(dot(n, h), 0.0), 200.0) * 0.35 * step(0.0, dot(n, sun));
     var colour = albedo * (ambient + (1.0 - ambient) * diffuse) + vec3<f32>(glint);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
-    let haze = air(-view, dist);
+    var haze: Air;
+    if (is_ortho()) {
+        haze = air_ortho(in.eye_offset);
+    } else {
+        haze = air(-view, dist);
+    }
     colour = colour * haze.transmittance + haze.inscatter;
     // Alpha 1 marks terrain coverage (read back by tests; forced opaque in saved images).
     return vec4<f32>(tone(colour), 1.0);

@@ -129,8 +129,9 @@ pub fn select_into(
         options,
         eye: view.position,
         frustum: Frustum::from_view(view, options.near_m),
-        occluder: EllipsoidalOccluder::new(&options.occluder, view.position),
+        occluder: EllipsoidalOccluder::new(&options.occluder, view.occlusion_eye()),
         sse_factor: view.sse_factor(),
+        ortho_px_per_m: view.ortho_height_m().map(|h| f64::from(view.height_px) / h),
         out,
     };
     for &root in oracle.scheme().roots() {
@@ -163,6 +164,8 @@ struct Walk<'a, O> {
     frustum: Frustum,
     occluder: EllipsoidalOccluder,
     sse_factor: f64,
+    /// Pixels per metre of an orthographic view (the same at every distance).
+    ortho_px_per_m: Option<f64>,
     out: &'a mut Selection,
 }
 
@@ -187,7 +190,10 @@ impl<O: TileOracle> Walk<'_, O> {
     /// A visible, loaded tile: draw it or refine it.
     fn visit(&mut self, key: TileKey, info: &TileInfo) {
         let distance_m = info.bounds.obb.distance_to(self.eye);
-        let sse_px = info.geometric_error_m * self.sse_factor / distance_m.max(1e-6);
+        let px_per_m = self
+            .ortho_px_per_m
+            .unwrap_or(self.sse_factor / distance_m.max(1e-6));
+        let sse_px = info.geometric_error_m * px_per_m;
         let can_refine = info.has_children && key.level() < self.options.max_level;
         if sse_px <= self.options.max_sse_px || !can_refine {
             self.draw(key, sse_px, distance_m);
