@@ -111,9 +111,11 @@ pub struct GlobeArgs {
     /// Vector data to draw: a GeoJSON file (or RFC 8142 sequence, or a `traffic` airspace
     /// file) with style overrides after '#', e.g.
     /// 'countries.geojson#stroke=%23ffcc00&stroke-width=2' or 'firs.geojson#extrude=true'
-    /// (keys: stroke, stroke-width, stroke-opacity, fill, fill-opacity, marker-color,
-    /// marker-size, marker-symbol, marker-outline, extrude, lower, upper, units, clamp,
-    /// path). Repeatable.
+    /// or 'airports.geojson#label={iata}' (keys: stroke, stroke-width, stroke-opacity,
+    /// stroke-linejoin, stroke-linecap, stroke-dasharray, fill, fill-opacity, marker-color,
+    /// marker-size, marker-symbol, marker-outline, marker-icon, label, label-size,
+    /// label-color, extrude, lower, upper, units, clamp, path, wall, corridor,
+    /// corridor-height). Repeatable.
     #[arg(long = "vector")]
     pub vector: Vec<String>,
 }

@@ -131,6 +131,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                     "features": s.features,
                     "line_instances": s.line_instances,
                     "fill_vertices": s.fill_vertices,
+                    "labels": s.labels,
+                    "labels_drawn": s.labels_drawn,
                     "draw_calls": s.draw_calls,
                     "gpu_bytes": s.gpu_bytes,
                 })

@@ -24,6 +24,11 @@
 
 use rustc_hash::FxHashMap;
 
+pub(crate) mod gpu;
+
+/// The label shader (leaders and glyphs), for validation.
+pub use gpu::SHADER;
+
 /// Labels at the head of the priority order tried every frame even when hidden.
 const ALWAYS_TRIED: usize = 64;
 

@@ -1,4 +1,4 @@
-//! The engine's own shaders (the vector and traffic overlays') parse and validate with naga,
+//! The engine's own shaders (the vector, traffic and label overlays') parse and validate with naga,
 //! without a GPU.
 
 use naga::valid::{Capabilities, ValidationFlags, Validator};
@@ -19,4 +19,9 @@ fn vector_shader_validates() {
 #[test]
 fn traffic_shader_validates() {
     validate("traffic.wgsl", globus_engine::traffic::SHADER);
+}
+
+#[test]
+fn label_shader_validates() {
+    validate("labels.wgsl", globus_engine::labels::SHADER);
 }

@@ -1150,3 +1150,96 @@ fn joins_caps_and_dashes_are_drawn_as_svg_draws_them_and_dashes_stay_on_the_grou
         "dashes moved on the ground: {same}/{total}"
     );
 }
+
+/// Thirty named fixes crowded over the Alps and one on the far side of the planet: labels
+/// sit beside their own point (at the corner the placer chose, 9 px off: the 12 px marker's
+/// half and a 3 px gap), never overlap one another, show their text (the picture changes
+/// inside each box), and the far one has none.
+#[test]
+fn named_points_get_decluttered_labels_beside_them_and_none_behind_the_planet() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let dir = common::scratch("vectors", "fixes");
+    let mut features = Vec::new();
+    let mut fixes = Vec::new();
+    for k in 0..30 {
+        let (lon, lat) = (7.0 + f64::from(k % 6) * 0.45, 45.6 + f64::from(k / 6) * 0.3);
+        fixes.push((lon, lat));
+        features.push(format!(
+            r#"{{"type":"Feature","properties":{{"name":"FX{k:02}"}},"geometry":{{"type":"Point","coordinates":[{lon},{lat}]}}}}"#
+        ));
+    }
+    features.push(
+        r#"{"type":"Feature","properties":{"name":"FAR"},"geometry":{"type":"Point","coordinates":[-172.0,-46.0]}}"#
+            .to_string(),
+    );
+    let file = write_geojson(
+        &dir,
+        "fixes.geojson",
+        &format!(
+            r#"{{"type":"FeatureCollection","features":[{}]}}"#,
+            features.join(",")
+        ),
+    );
+    let mut layer = VectorLayer::new();
+    let rules = StyleRules::from_fragment("label={name}&marker-color=%23ff00ff&label-size=13")
+        .expect("rules");
+    let (_, ids) = layer.add_file(&file, &rules).expect("fixes");
+    assert_eq!(ids.len(), 31);
+    let view =
+        common::camera(8.1, 46.2, 700_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let (drawn, plain) = with_and_without(&mut off, &view, &mut layer, "fix-labels");
+    let stats = layer.stats();
+    assert_eq!(stats.labels, 31, "{stats:?}");
+    let labels: Vec<_> = layer.drawn_labels().collect();
+    assert_eq!(labels.len() as u32, stats.labels_drawn);
+    assert!(
+        (8..30).contains(&labels.len()),
+        "{} of 30 crowded labels drawn",
+        labels.len()
+    );
+    assert!(
+        labels.iter().all(|l| l.0 != ids[30]),
+        "the far side's label is drawn"
+    );
+    let globe = off.globe();
+    let camera = globe.camera().expect("a frame");
+    for (i, a) in labels.iter().enumerate() {
+        assert_eq!(a.3, 1.0, "a still picture shows its labels whole");
+        for b in &labels[i + 1..] {
+            let overlap = a.2[0] < b.2[2] && b.2[0] < a.2[2] && a.2[1] < b.2[3] && b.2[1] < a.2[3];
+            assert!(!overlap, "{:?} and {:?} overlap", a, b);
+        }
+        // Its own point, 9 px from the box's nearest corner on both axes.
+        let k = ids.iter().position(|id| *id == a.0).expect("one of ours");
+        let (lon, lat) = fixes[k];
+        let ground = globe.drawn_ground_m(lon.to_radians(), lat.to_radians());
+        let at = camera
+            .project(globe.world_position(Cartographic::from_degrees(lon, lat, ground)))
+            .expect("in view");
+        let dx = (at.x - f64::from(a.2[0]))
+            .abs()
+            .min((at.x - f64::from(a.2[2])).abs());
+        let dy = (at.y - f64::from(a.2[1]))
+            .abs()
+            .min((at.y - f64::from(a.2[3])).abs());
+        assert!(
+            (dx - 9.0).abs() < 1.5 && (dy - 9.0).abs() < 1.5,
+            "label {:?} is {dx:.1}, {dy:.1} px from its point {at:?}",
+            a.2
+        );
+        // Text: the picture changed inside the box.
+        let mut changed = 0;
+        for y in a.2[1].ceil() as u32..a.2[3].floor() as u32 {
+            for x in a.2[0].ceil() as u32..a.2[2].floor() as u32 {
+                let (p, q) = (drawn.get(x, y), plain.get(x, y));
+                if (0..3).any(|c| (i32::from(p[c]) - i32::from(q[c])).abs() > 40) {
+                    changed += 1;
+                }
+            }
+        }
+        assert!(changed > 40, "label {:?}: {changed} pixels of text", a.2);
+    }
+    // Two more draw calls than without labels: leaders (none drawn) and glyphs.
+    assert!(stats.draw_calls <= 4, "{stats:?}");
+}

@@ -24,4 +24,4 @@ pub use drape::{DrapeSurface, DrapedSegment};
 pub use feature::{Feature, from_geojson};
 pub use load::{FeatureWarning, Loaded, load_file};
 pub use read::{MAX_FEATURE_BYTES, ReadError, ReadSummary, read, read_file};
-pub use style::{Clamp, LineCap, LineJoin, PathKind, Rgba, Style, StyleRules};
+pub use style::{Clamp, LineCap, LineJoin, PathKind, Rgba, Style, StyleRules, label_text};

@@ -6,6 +6,9 @@
 //! `path` (`geodesic` or `rhumb`) and `marker-outline`, and SVG's `stroke-linejoin` (`round`,
 //! `miter`, `bevel`), `stroke-linecap` (`round`, `butt`, `square`) and `stroke-dasharray`
 //! (dash and gap lengths in pixels, e.g. `"8 4"` or `[8, 4, 2, 4]`).
+//! Points can carry a name: `label` is its text, with `{property}` replaced by the feature's
+//! property of that name (MapLibre's token form, e.g. `{name}`), `label-size` its height in
+//! pixels (default 12) and `label-color` its colour (default: the marker's, lightened).
 //!
 //! Each value is looked up, in order, in the layer's overrides (`--vector FILE#key=value`),
 //! the feature's properties, the layer's defaults (config file), and the built-in defaults
@@ -125,6 +128,13 @@ pub struct Style {
     pub marker_icon: Option<String>,
     /// Point outline colour.
     pub marker_outline: Rgba,
+    /// The text drawn beside each point (tokens replaced; at most [`MAX_LABEL_CHARS`]
+    /// characters), if any.
+    pub label: Option<String>,
+    /// Label text height, pixels.
+    pub label_size_px: f32,
+    /// Label colour (`None`: the marker's, lightened).
+    pub label_color: Option<Rgba>,
     /// How heights are measured.
     pub clamp: Clamp,
     /// How lines and polygon edges run between vertices.
@@ -153,6 +163,9 @@ impl Default for Style {
             marker_square: false,
             marker_icon: None,
             marker_outline: Rgba([255, 255, 255, 255]),
+            label: None,
+            label_size_px: 12.0,
+            label_color: None,
             clamp: Clamp::Ground,
             path: PathKind::Geodesic,
             extrude: None,
@@ -160,6 +173,40 @@ impl Default for Style {
             corridor: None,
         }
     }
+}
+
+/// Longest label text kept, characters.
+pub const MAX_LABEL_CHARS: usize = 64;
+
+/// `template` with every `{key}` replaced by the property `key` (strings as they are,
+/// numbers and booleans printed; missing or other values: nothing), trimmed and cut to
+/// [`MAX_LABEL_CHARS`]; `None` when nothing is left.
+pub fn label_text(template: &str, properties: &Map<String, Value>) -> Option<String> {
+    let mut out = String::new();
+    let mut rest = template;
+    while let Some(open) = rest.find('{') {
+        out.push_str(&rest[..open]);
+        let after = &rest[open + 1..];
+        let Some(close) = after.find('}') else {
+            out.push_str(&rest[open..]);
+            rest = "";
+            break;
+        };
+        match properties.get(&after[..close]) {
+            Some(Value::String(s)) => out.push_str(s),
+            Some(v @ (Value::Number(_) | Value::Bool(_))) => out.push_str(&v.to_string()),
+            _ => {}
+        }
+        rest = &after[close + 1..];
+    }
+    out.push_str(rest);
+    let text: String = out
+        .trim()
+        .chars()
+        .filter(|c| !c.is_control())
+        .take(MAX_LABEL_CHARS)
+        .collect();
+    (!text.is_empty()).then_some(text)
 }
 
 /// Simplestyle's marker sizes, pixels.
@@ -247,6 +294,27 @@ impl StyleRules {
         let get = |key: &str| lookup(&sources, key);
         let mut style = Style::default();
         let mut bad = |key: &str, v: &Value| warnings.push(format!("style `{key}`: {v} ignored"));
+        if let Some(v) = get("label") {
+            match v {
+                Value::String(t) => style.label = label_text(t, properties),
+                Value::Number(_) | Value::Bool(_) => {
+                    style.label = label_text(&v.to_string(), properties)
+                }
+                _ => bad("label", v),
+            }
+        }
+        if let Some(v) = get("label-size") {
+            match number(v).filter(|s| *s >= 4.0 && *s <= 96.0) {
+                Some(s) => style.label_size_px = s as f32,
+                None => bad("label-size", v),
+            }
+        }
+        if let Some(v) = get("label-color") {
+            match colour(v) {
+                Some(c) => style.label_color = Some(c),
+                None => bad("label-color", v),
+            }
+        }
         for (key, slot) in [
             ("stroke", &mut style.stroke),
             ("marker-color", &mut style.marker_color),
@@ -519,6 +587,9 @@ pub const KEYS: &[&str] = &[
     "marker-symbol",
     "marker-outline",
     "marker-icon",
+    "label",
+    "label-size",
+    "label-color",
     "extrude",
     "lower",
     "upper",
@@ -554,6 +625,38 @@ mod tests {
 
     fn props(v: Value) -> Map<String, Value> {
         v.as_object().cloned().unwrap_or_default()
+    }
+
+    #[test]
+    fn labels_take_their_text_from_the_properties() {
+        let p = props(json!({"name": "GERSA", "ident": 42, "label": "plain", "x": null}));
+        assert_eq!(label_text("{name}", &p).as_deref(), Some("GERSA"));
+        assert_eq!(
+            label_text("{name} ({ident})", &p).as_deref(),
+            Some("GERSA (42)")
+        );
+        assert_eq!(label_text("{missing}", &p), None);
+        assert_eq!(label_text("  {x}  ", &p), None);
+        assert_eq!(label_text("open {name", &p).as_deref(), Some("open {name"));
+        assert_eq!(
+            label_text(&"W".repeat(100), &p).map(|t| t.len()),
+            Some(MAX_LABEL_CHARS)
+        );
+        // A feature's own `label` property is its text; an override's tokens read the
+        // feature's properties.
+        let mut w = Vec::new();
+        let own = StyleRules::default().resolve(&p, &mut w);
+        assert_eq!(own.label.as_deref(), Some("plain"));
+        let rules = StyleRules::from_fragment("label={name}&label-size=15&label-color=%23ffcc00")
+            .expect("rules");
+        let s = rules.resolve(&p, &mut w);
+        assert_eq!(s.label.as_deref(), Some("GERSA"));
+        assert_eq!(s.label_size_px, 15.0);
+        assert_eq!(s.label_color, Some(Rgba([255, 204, 0, 255])));
+        assert!(w.is_empty(), "{w:?}");
+        let bad = StyleRules::from_fragment("label-size=1000").expect("rules");
+        bad.resolve(&p, &mut w);
+        assert_eq!(w.len(), 1, "{w:?}");
     }
 
     #[test]

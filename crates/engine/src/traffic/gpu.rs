@@ -11,6 +11,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::models::ModelMesh;
 use crate::gpu_util::{Growing, Pipelines, buffer, buffer_entry, texture_entry};
+use crate::labels::gpu::{GlyphInstance, LabelDrawer, LabelGpu};
 use crate::overlay::FrameContext;
 use crate::text::GlyphAtlas;
 
@@ -63,49 +64,6 @@ pub(crate) struct Uniforms {
     pub kinds: [[f32; 4]; 4],
 }
 
-/// A placed label as the shaders read it (48 bytes); mirrored in `traffic.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub(crate) struct LabelGpu {
-    /// The aircraft on screen (pixels), its reversed-Z depth, the label's opacity.
-    pub anchor: [f32; 2],
-    pub depth: f32,
-    pub opacity: f32,
-    /// The box's top-left and size, pixels.
-    pub origin: [f32; 2],
-    pub size: [f32; 2],
-    /// Text colour (sRGB, packed) and where the leader starts from the anchor (pixels).
-    pub colour: u32,
-    pub clearance: f32,
-    pub spare: [f32; 2],
-}
-
-/// One glyph drawn: its label, its atlas glyph, its quad's top-left from the label's origin
-/// (pixels).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub(crate) struct GlyphInstance {
-    pub label: u32,
-    pub glyph: u32,
-    pub at: [f32; 2],
-}
-
-/// An atlas glyph for the shaders: texel rectangle, offset from the pen.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct GlyphGpu {
-    rect: [f32; 4],
-    offset: [f32; 2],
-    spare: [f32; 2],
-}
-
-/// How labels are drawn: pixels per atlas pixel, atlas size, halo width in field units.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub(crate) struct LabelStyle {
-    pub scale: [f32; 4],
-}
-
 /// Model vertex (24 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -133,16 +91,7 @@ pub(crate) struct Gpu {
     trail: wgpu::RenderPipeline,
     model: wgpu::RenderPipeline,
     symbol: wgpu::RenderPipeline,
-    leader: wgpu::RenderPipeline,
-    glyph: wgpu::RenderPipeline,
-    atlas: wgpu::TextureView,
-    atlas_sampler: wgpu::Sampler,
-    atlas_glyphs: wgpu::Buffer,
-    label_style: wgpu::Buffer,
-    labels: Growing,
-    glyphs: Growing,
-    label_count: u32,
-    glyph_count: u32,
+    labels: LabelDrawer,
     layout: wgpu::BindGroupLayout,
     uniforms: wgpu::Buffer,
     aircraft: Growing,
@@ -156,7 +105,7 @@ pub(crate) struct Gpu {
     trail_instances: Growing,
     /// Instance range and segments per instance of each trail bucket this frame.
     trail_ranges: [(Range<u32>, u32); 3],
-    bind_group: Option<(wgpu::BindGroup, [u64; 4], wgpu::TextureView)>,
+    bind_group: Option<(wgpu::BindGroup, [u64; 2], wgpu::TextureView)>,
     /// Slots drawn (symbols) this frame.
     slots: u32,
 }
@@ -180,22 +129,8 @@ impl Gpu {
                 buffer_entry(0, Stage::VERTEX_FRAGMENT, wgpu::BufferBindingType::Uniform),
                 buffer_entry(1, Stage::VERTEX, storage),
                 buffer_entry(2, Stage::VERTEX, storage),
-                // The terrain's depth: symbols test it per fragment, labels per vertex.
-                wgpu::BindGroupLayoutEntry {
-                    visibility: Stage::VERTEX_FRAGMENT,
-                    ..texture_entry(3, false, wgpu::TextureViewDimension::D2)
-                },
-                texture_entry(4, true, wgpu::TextureViewDimension::D2),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 5,
-                    visibility: Stage::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                buffer_entry(6, Stage::VERTEX, storage),
-                buffer_entry(7, Stage::VERTEX, storage),
-                buffer_entry(8, Stage::VERTEX, storage),
-                buffer_entry(9, Stage::VERTEX_FRAGMENT, wgpu::BufferBindingType::Uniform),
+                // The terrain's depth: symbols test it per fragment.
+                texture_entry(3, false, wgpu::TextureViewDimension::D2),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -257,23 +192,6 @@ impl Gpu {
             no_depth_test.clone(),
             &formats.colour_targets(blend, true),
         );
-        let leader = kit.make(
-            "traffic label leaders",
-            "leader_vs",
-            "leader_fs",
-            &[],
-            no_depth_test.clone(),
-            &formats.colour_targets(blend, false),
-        );
-        let glyph = kit.make(
-            "traffic label glyphs",
-            "glyph_vs",
-            "glyph_fs",
-            &[],
-            no_depth_test,
-            &formats.colour_targets(blend, false),
-        );
-        let (atlas, atlas_sampler, atlas_glyphs) = upload_atlas(frame, text);
         let mut vertices = Vec::new();
         let mut model_ranges: [Range<u32>; 4] = Default::default();
         for (k, mesh) in meshes.iter().enumerate() {
@@ -301,21 +219,7 @@ impl Gpu {
             trail,
             model,
             symbol,
-            leader,
-            glyph,
-            atlas,
-            atlas_sampler,
-            atlas_glyphs,
-            label_style: buffer(
-                device,
-                "traffic label style",
-                size_of::<LabelStyle>() as u64,
-                wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            ),
-            labels: Growing::new(device, "traffic labels", storage_usage, 48 * 256),
-            glyphs: Growing::new(device, "traffic label glyphs", storage_usage, 16 * 4096),
-            label_count: 0,
-            glyph_count: 0,
+            labels: LabelDrawer::new(frame, text, "traffic labels"),
             layout,
             uniforms: buffer(
                 device,
@@ -353,10 +257,7 @@ impl Gpu {
             + self.models.size()
             + self.instances.buffer.size()
             + self.trail_instances.buffer.size()
-            + self.labels.buffer.size()
-            + self.glyphs.buffer.size()
-            + self.atlas_glyphs.size()
-            + self.atlas.texture().size().width as u64 * self.atlas.texture().size().height as u64
+            + self.labels.gpu_bytes()
             + self.uniforms.size()
     }
 
@@ -391,22 +292,16 @@ impl Gpu {
         );
     }
 
-    /// Writes the frame's labels and their glyphs.
+    /// Writes the frame's labels and their glyphs, laid out at `text_px` pixels per line.
     pub(crate) fn write_labels(
         &mut self,
         frame: &FrameContext<'_>,
-        style: &LabelStyle,
+        text_px: f32,
+        tolerance: f32,
         labels: &[LabelGpu],
         glyphs: &[GlyphInstance],
     ) {
-        let (device, queue) = (frame.device(), frame.queue());
-        queue.write_buffer(&self.label_style, 0, bytemuck::bytes_of(style));
-        self.labels
-            .write(device, queue, bytemuck::cast_slice(labels));
-        self.glyphs
-            .write(device, queue, bytemuck::cast_slice(glyphs));
-        self.label_count = labels.len() as u32;
-        self.glyph_count = glyphs.len() as u32;
+        self.labels.write(frame, text_px, tolerance, labels, glyphs);
     }
 
     /// Writes the frame's uniforms, aircraft and model instances, and (re)makes the bind
@@ -441,12 +336,7 @@ impl Gpu {
             .write(device, queue, bytemuck::cast_slice(&flat));
         self.slots = aircraft.len() as u32;
         let depth = frame.terrain_depth();
-        let sizes = [
-            self.aircraft.buffer.size(),
-            self.trail_points.buffer.size(),
-            self.labels.buffer.size(),
-            self.glyphs.buffer.size(),
-        ];
+        let sizes = [self.aircraft.buffer.size(), self.trail_points.buffer.size()];
         if self
             .bind_group
             .as_ref()
@@ -471,30 +361,6 @@ impl Gpu {
                     wgpu::BindGroupEntry {
                         binding: 3,
                         resource: wgpu::BindingResource::TextureView(depth),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: wgpu::BindingResource::TextureView(&self.atlas),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: wgpu::BindingResource::Sampler(&self.atlas_sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 6,
-                        resource: self.atlas_glyphs.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 7,
-                        resource: self.labels.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 8,
-                        resource: self.glyphs.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 9,
-                        resource: self.label_style.as_entire_binding(),
                     },
                 ],
             });
@@ -552,18 +418,7 @@ impl Gpu {
         pass.set_bind_group(0, group, &[]);
         pass.set_pipeline(&self.symbol);
         pass.draw(0..self.slots * 6, 0..1);
-        let mut calls = 1;
-        if self.label_count > 0 {
-            pass.set_pipeline(&self.leader);
-            pass.draw(0..self.label_count * 6, 0..1);
-            calls += 1;
-        }
-        if self.glyph_count > 0 {
-            pass.set_pipeline(&self.glyph);
-            pass.draw(0..self.glyph_count * 6, 0..1);
-            calls += 1;
-        }
-        calls
+        1 + self.labels.draw(pass)
     }
 }
 
@@ -573,71 +428,4 @@ fn instance_slice<'a>(buffer: &'a Growing, r: &Range<u32>) -> wgpu::BufferSlice<
     buffer
         .buffer
         .slice(u64::from(r.start) * 4..u64::from(r.end) * 4)
-}
-
-/// The glyph atlas as a texture, its sampler and its glyph table.
-fn upload_atlas(
-    frame: &FrameContext<'_>,
-    text: &GlyphAtlas,
-) -> (wgpu::TextureView, wgpu::Sampler, wgpu::Buffer) {
-    let device = frame.device();
-    let size = wgpu::Extent3d {
-        width: text.size[0],
-        height: text.size[1],
-        depth_or_array_layers: 1,
-    };
-    let texture = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("traffic glyph atlas"),
-        size,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::R8Unorm,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
-    frame.queue().write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture: &texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        &text.texels,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(text.size[0]),
-            rows_per_image: Some(text.size[1]),
-        },
-        size,
-    );
-    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some("traffic glyph atlas"),
-        mag_filter: wgpu::FilterMode::Linear,
-        min_filter: wgpu::FilterMode::Linear,
-        ..Default::default()
-    });
-    let table: Vec<GlyphGpu> = text
-        .glyphs
-        .iter()
-        .map(|g| GlyphGpu {
-            rect: g.rect.map(|v| v as f32),
-            offset: g.offset,
-            spare: [0.0; 2],
-        })
-        .collect();
-    let glyphs = buffer(
-        device,
-        "traffic glyph table",
-        (table.len() * size_of::<GlyphGpu>()) as u64,
-        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-    );
-    frame
-        .queue()
-        .write_buffer(&glyphs, 0, bytemuck::cast_slice(&table));
-    (
-        texture.create_view(&wgpu::TextureViewDescriptor::default()),
-        sampler,
-        glyphs,
-    )
 }

@@ -28,7 +28,8 @@ use globus_geo::{BoundingSphere, Cartographic, DVec3, Ellipsoid, Frustum, Inters
 use globus_traffic::fleet::flags;
 use globus_traffic::{Fleet, FleetError, Sampled};
 
-use crate::labels::{LabelPlacer, LabelRequest, PlacedLabel};
+use crate::labels::LabelRequest;
+use crate::labels::gpu::{LabelBatch, LabelGpu};
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use crate::text::GlyphAtlas;
 use blocks::{BlockContent, LaidOut};
@@ -40,10 +41,7 @@ pub use globus_traffic::{
     Sample, Step, read_record,
 };
 pub use gpu::SHADER;
-use gpu::{
-    AircraftGpu, GlyphInstance, Gpu, LabelGpu, LabelStyle, PAGE_POINTS, TRAIL_BUCKETS, Uniforms,
-    bits,
-};
+use gpu::{AircraftGpu, Gpu, PAGE_POINTS, TRAIL_BUCKETS, Uniforms, bits};
 pub use models::{ModelMesh, aircraft_mesh};
 
 /// Pick ids of a layer made with [`TrafficLayer::new`] start here (clear of a
@@ -195,18 +193,10 @@ struct Labels {
     /// Made on the first frame that draws labels (`None` before, or when the font failed).
     atlas: Option<GlyphAtlas>,
     failed: bool,
-    placer: Option<LabelPlacer>,
     /// Per slot: its data block laid out.
     blocks: Vec<LaidOut>,
-    requests: Vec<LabelRequest>,
-    /// Per request: slot, and the aircraft's depth on screen.
-    request_slots: Vec<(u32, f32)>,
-    /// Symbols on screen: labels keep off them.
-    symbols: Vec<[f32; 4]>,
-    placed: Vec<PlacedLabel>,
-    rows: Vec<LabelGpu>,
-    glyphs: Vec<GlyphInstance>,
-    last_prepare: Option<Instant>,
+    /// This frame's requests (items: slots) and placed labels; the symbols are obstacles.
+    batch: LabelBatch,
 }
 
 impl Default for TrafficLayer {
@@ -522,9 +512,7 @@ impl TrafficLayer {
             *segments = 0;
         }
         let labels_on = self.style.labels && self.labels.atlas.is_some();
-        self.labels.requests.clear();
-        self.labels.request_slots.clear();
-        self.labels.symbols.clear();
+        self.labels.batch.begin();
         self.labels.blocks.resize_with(capacity, LaidOut::default);
         let occluder = EllipsoidalOccluder::new(&ellipsoid, view.occlusion_eye());
         let sampled = std::mem::take(&mut self.sampled);
@@ -617,10 +605,7 @@ impl TrafficLayer {
                 let [w, h] = self.labels.blocks[slot].size;
                 let half = self.style.symbol_px[kind] * 0.5;
                 let (x, y) = (px.x as f32, px.y as f32);
-                self.labels
-                    .symbols
-                    .push([x - half, y - half, x + half, y + half]);
-                self.labels.requests.push(LabelRequest {
+                let request = LabelRequest {
                     id: sampled.ids[r],
                     anchor_px: [px.x as f32, px.y as f32],
                     clearance_px: self.style.symbol_px[kind] * 0.5 + 4.0,
@@ -631,8 +616,13 @@ impl TrafficLayer {
                     } else {
                         (extent * px_per_m) as f32
                     },
-                });
-                self.labels.request_slots.push((slot as u32, depth as f32));
+                };
+                self.labels.batch.request(
+                    request,
+                    slot as u32,
+                    depth as f32,
+                    [x - half, y - half, x + half, y + half],
+                );
             }
             if self.style.models {
                 let true_px = extent * px_per_m;
@@ -649,26 +639,15 @@ impl TrafficLayer {
     /// Places this frame's labels and builds what the GPU draws of them.
     fn place_labels(&mut self, viewport: [f32; 2]) {
         let now = Instant::now();
-        // The first frame shows its labels at once (a still picture must not be caught
-        // mid-fade); later ones fade by the time between frames.
-        let dt = self
-            .labels
-            .last_prepare
-            .replace(now)
-            .map_or(f32::INFINITY, |t| (now - t).as_secs_f32());
-        let fade = self.style.label_fade_s;
         let l = &mut self.labels;
-        let placer = l.placer.get_or_insert_with(|| LabelPlacer::new(fade));
-        placer.place(&l.requests, &l.symbols, viewport, dt, &mut l.placed);
-        l.rows.clear();
-        l.glyphs.clear();
-        for p in &l.placed {
-            let (slot, depth) = l.request_slots[p.request];
-            let block = &l.blocks[slot as usize];
-            let r = &l.requests[p.request];
+        l.batch.place(viewport, self.style.label_fade_s);
+        let batch = &mut l.batch;
+        for k in 0..batch.placed.len() {
+            let p = batch.placed[k];
+            let (slot, depth) = batch.items[p.request];
+            let r = batch.requests[p.request];
             let row = self.rows[slot as usize];
-            let index = l.rows.len() as u32;
-            l.rows.push(LabelGpu {
+            let label = LabelGpu {
                 anchor: r.anchor_px,
                 depth,
                 opacity: p.opacity,
@@ -676,15 +655,12 @@ impl TrafficLayer {
                 size: [p.bounds[2] - p.bounds[0], p.bounds[3] - p.bounds[1]],
                 colour: label_colour(row.colour, row.bits & bits::SELECTED != 0),
                 clearance: r.clearance_px,
-                spare: [0.0; 2],
-            });
-            l.glyphs
-                .extend(block.glyphs.iter().map(|&(g, [x, y])| GlyphInstance {
-                    label: index,
-                    glyph: u32::from(g),
-                    at: [x + LABEL_PAD_PX, y + LABEL_PAD_PX],
-                }));
+                scale: 0.0,
+                spare: 0.0,
+            };
+            batch.push_row(label, &l.blocks[slot as usize].glyphs, LABEL_PAD_PX);
         }
+        let l = &self.labels.batch;
         self.stats.labels = l.placed.len() as u32;
         self.stats.labels_wanted = l.requests.len() as u32;
         self.stats.label_placement_s = now.elapsed().as_secs_f64();
@@ -694,6 +670,7 @@ impl TrafficLayer {
     /// min y, max x, max y, pixels), and its opacity.
     pub fn drawn_labels(&self) -> impl Iterator<Item = (u64, [f32; 4], f32)> + '_ {
         self.labels
+            .batch
             .placed
             .iter()
             .map(|p| (p.id, p.bounds, p.opacity))
@@ -940,18 +917,18 @@ impl Overlay for TrafficLayer {
             &self.instances,
             &self.trail_lists,
         );
-        if let Some(atlas) = &self.labels.atlas {
-            let scale = self.style.label_px / atlas.line_height;
-            // A halo 1.5 pixels wide, in the field's units (255ths per SPREAD_PX atlas pixels).
-            let halo = 1.5 / scale * 127.0 / (255.0 * crate::text::SPREAD_PX);
-            let style = LabelStyle {
-                scale: [scale, atlas.size[0] as f32, atlas.size[1] as f32, halo],
-            };
-            gpu.write_labels(frame, &style, &self.labels.rows, &self.labels.glyphs);
+        if self.labels.atlas.is_some() {
+            gpu.write_labels(
+                frame,
+                self.style.label_px,
+                SYMBOL_TOLERANCE,
+                &self.labels.batch.rows,
+                &self.labels.batch.glyphs,
+            );
         }
         let model_draws = self.instances.iter().filter(|l| !l.is_empty()).count() as u32;
         let trail_draws = self.trail_lists.iter().filter(|l| !l.0.is_empty()).count() as u32;
-        let label_draws = 2 * u32::from(!self.labels.rows.is_empty());
+        let label_draws = 2 * u32::from(!self.labels.batch.rows.is_empty());
         self.stats.draw_calls =
             u32::from(!self.rows.is_empty()) + model_draws + trail_draws + label_draws;
         self.stats.trail_segments = self

@@ -25,6 +25,7 @@
 
 mod build;
 pub(crate) mod gpu;
+mod labels;
 
 use std::path::Path;
 use std::time::Instant;
@@ -37,6 +38,7 @@ use rustc_hash::FxHashMap;
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use build::{Bbox, Built, TileDrape};
 use gpu::{EntryKey, Gpu};
+use labels::PointLabels;
 
 pub use gpu::SHADER;
 
@@ -68,6 +70,10 @@ pub struct VectorStats {
     pub rebuilt: bool,
     /// CPU seconds the last frame's prepare took.
     pub prepare_s: f64,
+    /// Points with a label (style `label`).
+    pub labels: usize,
+    /// Labels drawn in the last frame (the rest had no room, or were out of sight).
+    pub labels_drawn: u32,
 }
 
 struct Entry {
@@ -94,6 +100,10 @@ pub struct VectorLayer {
     icons: Icons,
     /// GPU entries to drop (features changed or removed, tiles invalidated).
     released: Vec<EntryKey>,
+    /// Names beside points.
+    labels: PointLabels,
+    /// The labels are to be laid out again (features added, changed or removed).
+    labels_stale: bool,
     stats: VectorStats,
 }
 
@@ -126,6 +136,8 @@ impl VectorLayer {
             gpu: None,
             released: Vec::new(),
             icons: Icons::default(),
+            labels: PointLabels::default(),
+            labels_stale: false,
             stats: VectorStats::default(),
         }
     }
@@ -159,6 +171,7 @@ impl VectorLayer {
             },
         );
         self.pending.push(id);
+        self.labels_stale = true;
         FeatureId(id)
     }
 
@@ -175,6 +188,7 @@ impl VectorLayer {
         }
         e.feature = feature;
         self.pending.push(id.0);
+        self.labels_stale = true;
         true
     }
 
@@ -183,6 +197,7 @@ impl VectorLayer {
         let Some(e) = self.entries.remove(&id.0) else {
             return false;
         };
+        self.labels_stale = true;
         if let Some(b) = e.built {
             self.changed.extend(b.bbox.map(|bb| (id.0, bb)));
             self.geometry_changed |= !b.chunks.is_empty();
@@ -221,6 +236,14 @@ impl VectorLayer {
     /// What the layer holds and what its last frame did.
     pub fn stats(&self) -> VectorStats {
         self.stats
+    }
+
+    /// The point labels drawn in the last frame: the feature, the point's index in it, the
+    /// label's box on screen (min x, min y, max x, max y, pixels) and its opacity.
+    pub fn drawn_labels(&self) -> impl Iterator<Item = (FeatureId, usize, [f32; 4], f32)> + '_ {
+        self.labels
+            .drawn_boxes()
+            .map(|((f, k), b, o)| (FeatureId(f), k as usize, b, o))
     }
 
     /// Builds pending features; invalidates the draped pieces of tiles they touch.
@@ -491,7 +514,7 @@ struct CachedTile {
 
 impl Overlay for VectorLayer {
     fn passes(&self) -> &[OverlayPass] {
-        &[OverlayPass::World]
+        &[OverlayPass::World, OverlayPass::ScreenAligned]
     }
 
     fn wants_terrain_depth(&self) -> bool {
@@ -524,14 +547,21 @@ impl Overlay for VectorLayer {
             self.geometry_changed = false;
             self.sync_gpu(frame);
         }
+        if std::mem::take(&mut self.labels_stale) {
+            self.labels
+                .rebuild(self.entries.iter().map(|(&id, e)| (id, &e.feature)));
+        }
+        self.labels.prepare(frame);
         if let Some(gpu) = &mut self.gpu {
             gpu.set_icons(frame, &self.icons.pixels);
             gpu.frame(frame);
             self.stats.line_instances = gpu.line_count;
             self.stats.fill_vertices = gpu.fill_vertices;
-            self.stats.gpu_bytes = gpu.bytes();
-            self.stats.draw_calls = gpu.draw_calls();
+            self.stats.gpu_bytes = gpu.bytes() + self.labels.gpu_bytes();
+            self.stats.draw_calls = gpu.draw_calls() + self.labels.draw_calls();
         }
+        self.stats.labels = self.labels.len();
+        self.stats.labels_drawn = self.labels.drawn();
         self.stats.features = self.entries.len();
         self.stats.tiles_draped = draped;
         self.stats.features_built = built;
@@ -545,9 +575,15 @@ impl Overlay for VectorLayer {
         }
     }
 
-    fn draw(&self, _: OverlayPass, _: &FrameContext<'_>, pass: &mut wgpu::RenderPass<'_>) {
-        if let Some(gpu) = &self.gpu {
-            gpu.draw(pass);
+    fn draw(&self, which: OverlayPass, _: &FrameContext<'_>, pass: &mut wgpu::RenderPass<'_>) {
+        match which {
+            OverlayPass::World => {
+                if let Some(gpu) = &self.gpu {
+                    gpu.draw(pass);
+                }
+            }
+            OverlayPass::ScreenAligned => self.labels.draw(pass),
+            _ => {}
         }
     }
 }
