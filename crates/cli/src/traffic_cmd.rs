@@ -137,6 +137,7 @@ pub fn stats_json(s: &TrafficStats) -> serde_json::Value {
     json!({
         "aircraft": s.aircraft,
         "models": s.models,
+        "models_coarse": s.models_coarse,
         "labels": s.labels,
         "labels_wanted": s.labels_wanted,
         "label_placement_us": s.label_placement_s * 1e6,

@@ -342,6 +342,40 @@ fn a_close_view_draws_the_lit_model_and_a_far_one_the_symbol() {
         (mean - c).length() < 6.0,
         "model about {mean}, aircraft at {c}"
     );
+    assert_eq!(layer.stats().models_coarse, 0, "90 px: the full mesh");
+    // 400 m of view: 34 px nose to tail, the coarse level of detail, still its outline.
+    let mid = common::camera(8.0, 46.0, 0.0, 0.0, -90.0, false).orthographic_view(
+        off.globe(),
+        400.0,
+        60.0,
+        w,
+        h,
+    );
+    let img = render(&mut off, &mid, &mut layer, "model-coarse");
+    assert_eq!(layer.stats().models, 1, "{:?}", layer.stats());
+    assert_eq!(layer.stats().models_coarse, 1, "{:?}", layer.stats());
+    let plain = off
+        .render_complete(&mid, TIMEOUT, &mut [])
+        .expect("render")
+        .image;
+    let mut changed = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (p, b) = (img.get(x, y), plain.get(x, y));
+            if (0..3).any(|k| (i32::from(p[k]) - i32::from(b[k])).abs() > 24) {
+                changed.push(DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+            }
+        }
+    }
+    let span = changed
+        .iter()
+        .flat_map(|a| changed.iter().map(move |b| (*a - *b).length()))
+        .fold(0.0, f64::max);
+    let want = 37.6 * f64::from(h) / 400.0;
+    assert!(
+        (span / want - 1.0).abs() < 0.15,
+        "{span} px across, {want} expected"
+    );
     // The same aircraft from 300 km is a magenta symbol.
     let far = common::camera(8.0, 46.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
     let img = render(&mut off, &far, &mut layer, "model-far");

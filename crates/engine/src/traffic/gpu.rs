@@ -2,14 +2,15 @@
 //! interpolated positions change), one of trail points mirroring the fleet's ring buffers
 //! (only written points are uploaded, in pages), the built-in models' vertex buffer, and
 //! three pipelines: trails and models in the world pass, symbols in the screen-aligned pass.
-//! Trails are one draw, symbols one, models one per kind drawn this frame.
+//! Trails are one draw per length bucket, symbols one, models one per kind and level of
+//! detail drawn this frame (the full mesh from 64 px, its clustered coarse level below).
 
 use std::mem::size_of;
 use std::ops::Range;
 
 use bytemuck::{Pod, Zeroable};
 
-use super::models::ModelMesh;
+use super::models::{MODEL_LOD_CELLS, ModelMesh};
 use crate::gpu_util::{Growing, Pipelines, buffer, buffer_entry, texture_entry};
 use crate::labels::gpu::{GlyphInstance, LabelDrawer, LabelGpu};
 use crate::overlay::FrameContext;
@@ -73,6 +74,11 @@ struct ModelVertex {
     accent: u32,
 }
 
+/// Levels of detail of each model: the mesh, and its clustered coarse level.
+pub(crate) const MODEL_LODS: usize = 2;
+/// Model draws at most: one per kind and level.
+pub(crate) const MODEL_DRAWS: usize = 4 * MODEL_LODS;
+
 /// Trail points per upload page (4 KiB): written points are uploaded by whole pages, and
 /// runs of dirty pages in one write.
 pub(crate) const PAGE_POINTS: usize = 256;
@@ -97,11 +103,12 @@ pub(crate) struct Gpu {
     aircraft: Growing,
     trail_points: Growing,
     models: wgpu::Buffer,
-    /// Vertex range of each kind's model in `models`.
-    model_ranges: [Range<u32>; 4],
+    /// Vertex range of each kind's model in `models`, per level of detail (index
+    /// `kind * MODEL_LODS + level`: 0 full, 1 coarse).
+    model_ranges: [Range<u32>; MODEL_DRAWS],
     instances: Growing,
-    /// Instance range of each kind this frame (into `instances`).
-    instance_ranges: [Range<u32>; 4],
+    /// Instance range of each kind and level this frame (into `instances`).
+    instance_ranges: [Range<u32>; MODEL_DRAWS],
     trail_instances: Growing,
     /// Instance range and segments per instance of each trail bucket this frame.
     trail_ranges: [(Range<u32>, u32); 3],
@@ -193,8 +200,11 @@ impl Gpu {
             &formats.colour_targets(blend, true),
         );
         let mut vertices = Vec::new();
-        let mut model_ranges: [Range<u32>; 4] = Default::default();
-        for (k, mesh) in meshes.iter().enumerate() {
+        let mut model_ranges: [Range<u32>; MODEL_DRAWS] = Default::default();
+        let levels = meshes
+            .iter()
+            .flat_map(|m| [m.clone(), m.simplified(MODEL_LOD_CELLS)]);
+        for (k, mesh) in levels.enumerate() {
             let start = vertices.len() as u32;
             vertices.extend(mesh.positions.iter().zip(&mesh.normals).enumerate().map(
                 |(i, (&position, &normal))| ModelVertex {
@@ -311,7 +321,7 @@ impl Gpu {
         frame: &FrameContext<'_>,
         uniforms: &Uniforms,
         aircraft: &[AircraftGpu],
-        instances: &[Vec<u32>; 4],
+        instances: &[Vec<u32>; MODEL_DRAWS],
         trails: &[(Vec<u32>, u32); 3],
     ) {
         let (device, queue) = (frame.device(), frame.queue());

@@ -41,8 +41,8 @@ pub use globus_traffic::{
     Sample, Step, read_record,
 };
 pub use gpu::SHADER;
-use gpu::{AircraftGpu, Gpu, PAGE_POINTS, TRAIL_BUCKETS, Uniforms, bits};
-pub use models::{ModelMesh, aircraft_mesh};
+use gpu::{AircraftGpu, Gpu, MODEL_DRAWS, MODEL_LODS, PAGE_POINTS, TRAIL_BUCKETS, Uniforms, bits};
+pub use models::{MODEL_LOD_CELLS, MODEL_LOD_FULL_PX, ModelMesh, aircraft_mesh};
 
 /// Pick ids of a layer made with [`TrafficLayer::new`] start here (clear of a
 /// [`crate::VectorLayer`]'s, which start at 1).
@@ -109,6 +109,8 @@ pub struct TrafficStats {
     pub aircraft: usize,
     /// Aircraft drawn as models in the last frame.
     pub models: u32,
+    /// Of those, drawn at the coarse level of detail (under [`MODEL_LOD_FULL_PX`]).
+    pub models_coarse: u32,
     /// Draw calls of the last frame.
     pub draw_calls: u32,
     /// GPU bytes of the layer's buffers.
@@ -177,7 +179,8 @@ pub struct TrafficLayer {
     upload_all: bool,
     built_for: Option<(Ellipsoid, f64)>,
     writes: Vec<u32>,
-    instances: [Vec<u32>; 4],
+    /// Model instances per kind and level of detail (`kind * MODEL_LODS + level`).
+    instances: [Vec<u32>; MODEL_DRAWS],
     /// Slots whose trails are drawn, by bucket, with the most segments one needs.
     trail_lists: [(Vec<u32>, u32); 3],
     gpu: Option<Gpu>,
@@ -629,7 +632,9 @@ impl TrafficLayer {
                 if true_px >= 0.75 * f64::from(self.style.symbol_px[kind])
                     && sees(world, extent * 2.0)
                 {
-                    self.instances[kind].push(slot as u32);
+                    // The coarse level until the model is large on screen.
+                    let level = usize::from(true_px < MODEL_LOD_FULL_PX);
+                    self.instances[kind * MODEL_LODS + level].push(slot as u32);
                 }
             }
         }
@@ -937,6 +942,13 @@ impl Overlay for TrafficLayer {
             .map(|(l, s)| l.len() as u32 * s)
             .sum();
         self.stats.models = self.instances.iter().map(|l| l.len() as u32).sum();
+        self.stats.models_coarse = self
+            .instances
+            .iter()
+            .skip(1)
+            .step_by(MODEL_LODS)
+            .map(|l| l.len() as u32)
+            .sum();
         self.stats.gpu_bytes = gpu.gpu_bytes();
         self.stats.trail_points_uploaded = uploaded as u32;
         self.stats.prepare_s = started.elapsed().as_secs_f64();

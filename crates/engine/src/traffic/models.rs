@@ -13,6 +13,13 @@
 use glam::Vec3;
 use globus_traffic::AircraftKind;
 
+/// Cells across a model's extent in its coarse level of detail ([`ModelMesh::simplified`]):
+/// at the switch to the full mesh ([`MODEL_LOD_FULL_PX`]) a cell is under 3 pixels.
+pub const MODEL_LOD_CELLS: u32 = 24;
+/// On-screen size (pixels, of the model's largest extent) from which the full mesh is drawn;
+/// below it, the coarse level.
+pub const MODEL_LOD_FULL_PX: f64 = 64.0;
+
 /// One aircraft shape: triangles with flat normals.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ModelMesh {
@@ -46,6 +53,61 @@ impl ModelMesh {
             }
         }
         (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f32::max)
+    }
+
+    /// The same shape with fewer triangles, for when it is small on screen: vertex
+    /// clustering (Rossignac and Borrel 1993) on a grid of `cells` cells across the largest
+    /// extent. Every corner moves to the mean of the corners in its cell; triangles whose
+    /// corners share a cell, or that repeat one already kept (a thin slab's two faces), go.
+    /// Written here rather than taken from meshoptimizer: the shapes are flat-shaded
+    /// triangle soups of a few hundred triangles (for which clustering is all a level of
+    /// detail needs), and its edge collapse would want them welded first and a C++ build.
+    pub fn simplified(&self, cells: u32) -> ModelMesh {
+        let extent = self.extent_m();
+        if self.positions.is_empty() || extent <= 0.0 || cells == 0 {
+            return self.clone();
+        }
+        let mut lo = [f32::INFINITY; 3];
+        for p in &self.positions {
+            for i in 0..3 {
+                lo[i] = lo[i].min(p[i]);
+            }
+        }
+        let cell = extent / cells as f32;
+        let key = |p: &[f32; 3]| -> [i32; 3] {
+            [0, 1, 2].map(|i| ((p[i] - lo[i]) / cell).floor() as i32)
+        };
+        let mut means: rustc_hash::FxHashMap<[i32; 3], (Vec3, u32)> = Default::default();
+        for p in &self.positions {
+            let m = means.entry(key(p)).or_insert((Vec3::ZERO, 0));
+            m.0 += Vec3::from(*p);
+            m.1 += 1;
+        }
+        let mean = |k: &[i32; 3]| {
+            means
+                .get(k)
+                .map_or([0.0; 3], |(sum, n)| (*sum / *n as f32).to_array())
+        };
+        let mut kept: rustc_hash::FxHashSet<[[i32; 3]; 3]> = Default::default();
+        let mut out = ModelMesh::default();
+        for (t, accents) in self
+            .positions
+            .chunks_exact(3)
+            .zip(self.accents.chunks_exact(3))
+        {
+            let keys = [key(&t[0]), key(&t[1]), key(&t[2])];
+            if keys[0] == keys[1] || keys[1] == keys[2] || keys[0] == keys[2] {
+                continue;
+            }
+            let mut sorted = keys;
+            sorted.sort_unstable();
+            if !kept.insert(sorted) {
+                continue;
+            }
+            let [a, b, c] = keys.map(|k| mean(&k));
+            out.push_triangle(a, b, c, accents[0] != 0);
+        }
+        out
     }
 
     /// A mesh of triangles (three positions each, model metres) with flat normals; those
@@ -369,6 +431,50 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_coarse_level_keeps_the_outline_with_a_fraction_of_the_triangles() {
+        let (mut fine, mut coarse) = (0, 0);
+        for kind in AircraftKind::ALL {
+            let m = aircraft_mesh(kind);
+            let c = m.simplified(MODEL_LOD_CELLS);
+            assert!(
+                c.triangles() * 4 < m.triangles() * 3 && c.triangles() > 20,
+                "{kind:?}: {} of {} triangles",
+                c.triangles(),
+                m.triangles()
+            );
+            // Same length and span within a cell (corners move to their cell's mean).
+            let cell = m.extent_m() / MODEL_LOD_CELLS as f32;
+            let ((lo, hi), (clo, chi)) = (bounds(&m), bounds(&c));
+            for i in 0..2 {
+                assert!(
+                    (lo[i] - clo[i]).abs() <= cell,
+                    "{kind:?} axis {i}: {lo:?} {clo:?}"
+                );
+                assert!(
+                    (hi[i] - chi[i]).abs() <= cell,
+                    "{kind:?} axis {i}: {hi:?} {chi:?}"
+                );
+            }
+            fine += m.triangles();
+            coarse += c.triangles();
+            // Still painted: accents survive.
+            assert!(c.accents.contains(&1), "{kind:?}");
+            assert_eq!(c.positions.len(), c.normals.len());
+            // Flat normals of non-degenerate triangles.
+            assert!(
+                c.normals
+                    .iter()
+                    .all(|n| (Vec3::from(*n).length() - 1.0).abs() < 1e-4)
+            );
+        }
+        // Over the four shapes, well under half.
+        assert!(coarse * 2 < fine, "{coarse} of {fine} triangles");
+        // Nothing to simplify: the same.
+        let empty = ModelMesh::default();
+        assert_eq!(empty.simplified(8), empty);
     }
 
     #[test]
