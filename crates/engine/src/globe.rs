@@ -527,9 +527,13 @@ impl Globe {
             layer: &self.layer,
             terrain_depth: targets.terrain_depth_view(),
             sun_direction: self.sun_direction,
+            screen_boxes: Default::default(),
         };
         for o in overlays.iter_mut() {
             o.prepare(&frame);
+        }
+        for o in overlays.iter_mut() {
+            o.place_labels(&frame);
         }
         {
             let mut pass = begin_pass(encoder, "terrain", colour, targets, Attach::Terrain);

@@ -12,7 +12,9 @@
 //! | [`OverlayPass::Screen`] | HUD: pixel coordinates | none |
 //!
 //! Each frame the engine calls [`Overlay::prepare`] on every overlay (on the render thread,
-//! with the device, queue and the frame's [`FrameCamera`]), then [`Overlay::draw`] once per
+//! with the device, queue and the frame's [`FrameCamera`]), then [`Overlay::place_labels`] on
+//! every overlay (once all have claimed their symbols' screen boxes, so labels keep off every
+//! layer's symbols and earlier layers' labels), then [`Overlay::draw`] once per
 //! pass the overlay draws in ([`Overlay::passes`]), recording into a render pass the engine
 //! began. Pipelines declare the frame's targets through [`FrameFormats`]: colour at location
 //! 0, the id buffer at location 1 (write non-zero object ids there to be pickable, see
@@ -64,12 +66,28 @@ pub struct FrameContext<'a> {
     pub(crate) layer: &'a TerrainLayer,
     pub(crate) terrain_depth: &'a wgpu::TextureView,
     pub(crate) sun_direction: DVec3,
+    /// Screen boxes overlays prepared earlier this frame drew labels and symbols in.
+    pub(crate) screen_boxes: std::cell::RefCell<Vec<[f32; 4]>>,
 }
 
 impl FrameContext<'_> {
     /// The device (create pipelines and buffers with it).
     pub fn device(&self) -> &wgpu::Device {
         self.device
+    }
+
+    /// Screen boxes (min x, min y, max x, max y, pixels) where overlays prepared earlier in
+    /// this frame draw labels and symbols. An overlay that places labels keeps them off these
+    /// and then claims its own ([`FrameContext::claim_screen_boxes`]), so the labels of
+    /// different overlays never overlap one another (the earlier overlay's win).
+    pub fn screen_boxes(&self) -> Vec<[f32; 4]> {
+        self.screen_boxes.borrow().clone()
+    }
+
+    /// Adds boxes where this overlay draws labels or symbols (see
+    /// [`FrameContext::screen_boxes`]).
+    pub fn claim_screen_boxes(&self, boxes: impl IntoIterator<Item = [f32; 4]>) {
+        self.screen_boxes.borrow_mut().extend(boxes);
     }
 
     /// The queue (write buffers with it; the engine submits).
@@ -159,6 +177,14 @@ pub trait Overlay {
     /// Called once a frame before any pass is recorded: update buffers for this frame's
     /// camera, create pipelines the first time.
     fn prepare(&mut self, frame: &FrameContext<'_>);
+
+    /// Called once a frame after every overlay's [`Overlay::prepare`]: place labels. By then
+    /// every overlay has claimed the screen boxes of its symbols
+    /// ([`FrameContext::claim_screen_boxes`]), so labels keep off all of them; each overlay's
+    /// labels then keep off those placed before (overlays in the order given).
+    fn place_labels(&mut self, frame: &FrameContext<'_>) {
+        let _ = frame;
+    }
 
     /// Whether [`FrameContext::terrain_depth`] must hold the terrain's depth this frame
     /// (costs one depth-buffer copy per frame when any overlay wants it).

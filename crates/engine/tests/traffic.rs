@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use globus_engine::traffic::{AircraftKind, Batch, Sample, callsign_bytes};
 use globus_engine::{
-    Cartographic, DVec2, Globe, Headless, RgbaImage, TrafficLayer, View, save_png,
+    Cartographic, DVec2, Globe, Headless, RgbaImage, StyleRules, TrafficLayer, VectorLayer, View,
+    save_png,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(300);
@@ -737,4 +738,88 @@ fn a_mountain_hides_an_aircraft_and_its_label() {
         pixels_of(&img, CYAN, sp, 12.0).len() > 10,
         "the visible symbol is missing"
     );
+}
+
+/// Named fixes and aircraft crowded over the same few hundred pixels, the vector layer
+/// prepared first: the aircraft's data blocks keep off the fixes' names and markers, so no
+/// two labels of the scene overlap, whichever layer they belong to.
+#[test]
+fn data_blocks_keep_off_the_names_of_fixes_drawn_in_the_same_view() {
+    let (w, h) = (480u32, 360u32);
+    let mut off = Headless::new(&Globe::builder(), w, h).expect("a GPU or lavapipe");
+    let mut fixes = VectorLayer::new();
+    let rules = StyleRules::from_fragment("label={name}").expect("rules");
+    let mut traffic = TrafficLayer::new();
+    let mut batch = Batch::default();
+    for k in 0..24u32 {
+        let (lon, lat) = (7.2 + f64::from(k % 6) * 0.3, 45.8 + f64::from(k / 6) * 0.25);
+        let json = format!(
+            r#"{{"type":"Feature","properties":{{"name":"FIX{k:02}"}},"geometry":{{"type":"Point","coordinates":[{lon},{lat}]}}}}"#
+        );
+        let f: geojson::Feature = json.parse().expect("feature");
+        let mut warnings = Vec::new();
+        fixes.add(
+            globus_vector::from_geojson(k as usize, f, &rules, &mut warnings).expect("a point"),
+        );
+        batch.push(sample(
+            100 + u64::from(k),
+            0.0,
+            lon + 0.12,
+            lat + 0.1,
+            10_000.0,
+            45.0,
+            CYAN,
+        ));
+    }
+    traffic.apply(&batch).expect("apply");
+    traffic.set_time(0.0);
+    let view =
+        common::camera(8.0, 46.2, 200_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let frame = off
+        .render_complete(&view, TIMEOUT, &mut [&mut fixes, &mut traffic])
+        .expect("render");
+    let dir = globus_test_support::output_dir("traffic");
+    save_png(&frame.image, &dir.join("fixes-and-blocks.png")).expect("save");
+    let names: Vec<[f32; 4]> = fixes.drawn_labels().map(|l| l.2).collect();
+    let blocks: Vec<[f32; 4]> = traffic.drawn_labels().map(|l| l.1).collect();
+    assert!(
+        names.len() >= 4 && blocks.len() >= 2,
+        "{} names, {} blocks",
+        names.len(),
+        blocks.len()
+    );
+    let overlap =
+        |a: &[f32; 4], b: &[f32; 4]| a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+    for b in &blocks {
+        for n in &names {
+            assert!(!overlap(b, n), "data block {b:?} over the name {n:?}");
+        }
+    }
+    // And no label of either layer covers a symbol of either: the aircraft's and the
+    // fixes' 12 px markers.
+    let globe = off.globe();
+    let half =
+        f64::from(traffic.style().symbol_px[AircraftKind::NarrowBody.index() as usize]) * 0.5;
+    let mut symbols = Vec::new();
+    for k in 0..24u32 {
+        let (lon, lat) = (7.2 + f64::from(k % 6) * 0.3, 45.8 + f64::from(k / 6) * 0.25);
+        let ground = globe.drawn_ground_m(lon.to_radians(), lat.to_radians());
+        for (p, r) in [
+            (project(globe, lon + 0.12, lat + 0.1, 10_000.0), half),
+            (project(globe, lon, lat, ground), 6.0),
+        ] {
+            let r = r - 0.5;
+            symbols.push([
+                (p.x - r) as f32,
+                (p.y - r) as f32,
+                (p.x + r) as f32,
+                (p.y + r) as f32,
+            ]);
+        }
+    }
+    for l in names.iter().chain(&blocks) {
+        for s in &symbols {
+            assert!(!overlap(l, s), "label {l:?} over the symbol {s:?}");
+        }
+    }
 }

@@ -110,23 +110,35 @@ impl LabelBatch {
         self.obstacles.push(obstacle);
     }
 
-    /// Places the requests in a viewport (pixels), fading over `fade_s`. The first frame
-    /// shows its labels at once (a still picture must not be caught mid-fade); later ones
-    /// fade by the time between frames.
-    pub(crate) fn place(&mut self, viewport: [f32; 2], fade_s: f32) {
+    /// Claims the objects' symbols ([`LabelBatch::obstacles`]) on the frame's screen, so
+    /// every overlay's labels keep off them ([`FrameContext::claim_screen_boxes`]).
+    pub(crate) fn claim_symbols(&self, frame: &FrameContext<'_>) {
+        frame.claim_screen_boxes(self.obstacles.iter().copied());
+    }
+
+    /// Places the requests on the frame's screen, fading over `fade_s`, clear of every
+    /// symbol and of the labels placed before ([`FrameContext::screen_boxes`]), then claims
+    /// its labels for the overlays after. The first frame shows its labels at once (a still
+    /// picture must not be caught mid-fade); later ones fade by the time between frames.
+    pub(crate) fn place(&mut self, frame: &FrameContext<'_>, fade_s: f32) {
         let now = Instant::now();
         let dt = self
             .last_prepare
             .replace(now)
             .map_or(f32::INFINITY, |t| (now - t).as_secs_f32());
+        let (w, h) = frame.camera().viewport_px();
+        // Its own symbols are among the frame's boxes already.
+        let own = std::mem::replace(&mut self.obstacles, frame.screen_boxes());
         let placer = self.placer.get_or_insert_with(|| LabelPlacer::new(fade_s));
         placer.place(
             &self.requests,
             &self.obstacles,
-            viewport,
+            [w as f32, h as f32],
             dt,
             &mut self.placed,
         );
+        self.obstacles = own;
+        frame.claim_screen_boxes(self.placed.iter().map(|p| p.bounds));
     }
 
     /// Adds a placed label's row and its glyphs (atlas glyph, top-left from the text's

@@ -642,10 +642,10 @@ impl TrafficLayer {
     }
 
     /// Places this frame's labels and builds what the GPU draws of them.
-    fn place_labels(&mut self, viewport: [f32; 2]) {
+    fn place_labels_now(&mut self, frame: &FrameContext<'_>) {
         let now = Instant::now();
         let l = &mut self.labels;
-        l.batch.place(viewport, self.style.label_fade_s);
+        l.batch.place(frame, self.style.label_fade_s);
         let batch = &mut l.batch;
         for k in 0..batch.placed.len() {
             let p = batch.placed[k];
@@ -842,8 +842,7 @@ impl Overlay for TrafficLayer {
         self.stats.trail_points_encoded = self.encode_trails(frame, epoch);
         self.place_aircraft(frame, epoch);
 
-        let (vw, vh) = frame.camera().viewport_px();
-        self.place_labels([vw as f32, vh as f32]);
+        self.labels.batch.claim_symbols(frame);
         if self.gpu.is_none() {
             let fallback;
             let atlas = match &self.labels.atlas {
@@ -922,20 +921,9 @@ impl Overlay for TrafficLayer {
             &self.instances,
             &self.trail_lists,
         );
-        if self.labels.atlas.is_some() {
-            gpu.write_labels(
-                frame,
-                self.style.label_px,
-                SYMBOL_TOLERANCE,
-                &self.labels.batch.rows,
-                &self.labels.batch.glyphs,
-            );
-        }
         let model_draws = self.instances.iter().filter(|l| !l.is_empty()).count() as u32;
         let trail_draws = self.trail_lists.iter().filter(|l| !l.0.is_empty()).count() as u32;
-        let label_draws = 2 * u32::from(!self.labels.batch.rows.is_empty());
-        self.stats.draw_calls =
-            u32::from(!self.rows.is_empty()) + model_draws + trail_draws + label_draws;
+        self.stats.draw_calls = u32::from(!self.rows.is_empty()) + model_draws + trail_draws;
         self.stats.trail_segments = self
             .trail_lists
             .iter()
@@ -952,6 +940,24 @@ impl Overlay for TrafficLayer {
         self.stats.gpu_bytes = gpu.gpu_bytes();
         self.stats.trail_points_uploaded = uploaded as u32;
         self.stats.prepare_s = started.elapsed().as_secs_f64();
+    }
+
+    fn place_labels(&mut self, frame: &FrameContext<'_>) {
+        let started = Instant::now();
+        self.place_labels_now(frame);
+        if let Some(gpu) = self.gpu.as_mut()
+            && self.labels.atlas.is_some()
+        {
+            gpu.write_labels(
+                frame,
+                self.style.label_px,
+                SYMBOL_TOLERANCE,
+                &self.labels.batch.rows,
+                &self.labels.batch.glyphs,
+            );
+        }
+        self.stats.draw_calls += 2 * u32::from(!self.labels.batch.rows.is_empty());
+        self.stats.prepare_s += started.elapsed().as_secs_f64();
     }
 
     fn draw(

@@ -129,7 +129,7 @@ impl PointLabels {
         })
     }
 
-    /// Places this frame's labels and uploads them.
+    /// Projects this frame's labelled points and claims their markers' boxes.
     pub(crate) fn prepare(&mut self, frame: &FrameContext<'_>) {
         self.batch.begin();
         if self.items.is_empty() {
@@ -139,9 +139,9 @@ impl PointLabels {
             }
             return;
         }
-        let Some(atlas) = &self.atlas else {
+        if self.atlas.is_none() {
             return;
-        };
+        }
         let camera = frame.camera();
         let view = *camera.view();
         let (w, h) = (f64::from(view.width_px), f64::from(view.height_px));
@@ -180,7 +180,19 @@ impl PointLabels {
                 [x - r, y - r, x + r, y + r],
             );
         }
-        self.batch.place([w as f32, h as f32], FADE_S);
+        self.batch.claim_symbols(frame);
+    }
+
+    /// Places this frame's labels (after every overlay claimed its symbols) and uploads
+    /// them.
+    pub(crate) fn place(&mut self, frame: &FrameContext<'_>) {
+        if self.items.is_empty() {
+            return;
+        }
+        let Some(atlas) = &self.atlas else {
+            return;
+        };
+        self.batch.place(frame, FADE_S);
         let drawer = self
             .drawer
             .get_or_insert_with(|| LabelDrawer::new(frame, atlas, "point labels"));

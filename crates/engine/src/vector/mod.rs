@@ -561,12 +561,20 @@ impl Overlay for VectorLayer {
             self.stats.draw_calls = gpu.draw_calls() + self.labels.draw_calls();
         }
         self.stats.labels = self.labels.len();
-        self.stats.labels_drawn = self.labels.drawn();
         self.stats.features = self.entries.len();
         self.stats.tiles_draped = draped;
         self.stats.features_built = built;
         self.stats.rebuilt = rebuild;
         self.stats.prepare_s = started.elapsed().as_secs_f64();
+    }
+
+    fn place_labels(&mut self, frame: &FrameContext<'_>) {
+        self.labels.place(frame);
+        self.stats.labels_drawn = self.labels.drawn();
+        if let Some(gpu) = &self.gpu {
+            self.stats.gpu_bytes = gpu.bytes() + self.labels.gpu_bytes();
+            self.stats.draw_calls = gpu.draw_calls() + self.labels.draw_calls();
+        }
     }
 
     fn record(&mut self, frame: &FrameContext<'_>, encoder: &mut wgpu::CommandEncoder) {
