@@ -662,14 +662,18 @@ impl State {
                     t.scene.layer.stats().aircraft
                 )
             });
+            // Orthographic: the projection's size; perspective: the height above ground.
+            let scale = match self.controller.view().ortho_height_m() {
+                Some(m) => format!("top-down {:.1} km", m / 1e3),
+                None => format!(
+                    "{:.0} m above ground",
+                    self.controller.height_above_ground_m(&self.globe)
+                ),
+            };
             self.window.set_title(&format!(
-                "Globus | {:.1} fps | {} tiles drawn | {} loading | {} imagery loading | {:.0} m \
-                 above ground{traffic}",
-                self.fps.fps,
-                report.draw.tiles,
-                report.wanted,
-                report.colours_pending,
-                self.controller.height_above_ground_m(&self.globe)
+                "Globus | {:.1} fps | {} tiles drawn | {} loading | {} imagery loading | \
+                 {scale}{traffic}",
+                self.fps.fps, report.draw.tiles, report.wanted, report.colours_pending,
             ));
         }
         Ok(())

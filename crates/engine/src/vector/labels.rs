@@ -170,8 +170,8 @@ impl PointLabels {
                 anchor_px: [x, y],
                 clearance_px: r + GAP_PX,
                 size_px: [item.size[0] + 2.0 * PAD_PX, item.size[1] + 2.0 * PAD_PX],
-                // Larger text first; then the order of the features.
-                priority: item.text_px - (i as f32) * 1e-6,
+                // Larger text first; ties go by id: the order of the features and points.
+                priority: item.text_px,
             };
             self.batch.request(
                 request,
