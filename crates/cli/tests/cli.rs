@@ -510,3 +510,53 @@ fn render_draws_vector_files_from_the_command_line_and_the_config() {
         fails_with_one_line(&args, &needles);
     }
 }
+
+/// A PMTiles archive whose root directory is a gzip bomb (80 MiB of zeros in 80 kB) is one
+/// line naming the file and the limit, and says it once (a message that quotes its cause does
+/// not print the cause again as the next link of the chain).
+#[test]
+fn a_pmtiles_bomb_is_refused_in_one_line_that_says_it_once() {
+    use std::io::Write;
+    let dir = common::scratch("cli", "pmtiles-bomb");
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    let zeros = vec![0u8; 1 << 20];
+    for _ in 0..80 {
+        gz.write_all(&zeros).expect("gzip");
+    }
+    let bomb = gz.finish().expect("gzip");
+    // A v3 header: the root directory right after it, gzip inside, PNG terrain, levels 0-10.
+    let mut header = vec![0u8; 127];
+    header[..7].copy_from_slice(b"PMTiles");
+    header[7] = 3;
+    let end = 127 + bomb.len() as u64;
+    for (k, v) in [127, bomb.len() as u64, end, 0, end, 0, end, 0, 1, 1, 1]
+        .into_iter()
+        .enumerate()
+    {
+        header[8 + 8 * k..16 + 8 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    header[96..102].copy_from_slice(&[1, 2, 1, 2, 0, 10]);
+    for (k, v) in [-1_800_000_000i32, -850_000_000, 1_800_000_000, 850_000_000]
+        .into_iter()
+        .enumerate()
+    {
+        header[102 + 4 * k..106 + 4 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    let file = dir.join("bomb.pmtiles");
+    std::fs::write(&file, [header, bomb].concat()).expect("write");
+    let out = dir.join("bomb.png");
+    let args = [
+        "render",
+        "--camera",
+        "10,10,2000000,0,-90",
+        "--size",
+        "64x48",
+        "--terrain",
+        common::s(&file),
+        "--out",
+        common::s(&out),
+    ];
+    fails_with_one_line(&args, &["bomb.pmtiles", "inflates past 67108864 bytes"]);
+    let err = String::from_utf8_lossy(&globus(&args).stderr).to_string();
+    assert_eq!(err.matches("inflates past").count(), 1, "{err}");
+}

@@ -1,5 +1,6 @@
 //! The engine's errors: one enum for everything that can fail when a globe is built or
-//! asked something, each naming what failed.
+//! asked something, each naming what failed. A message that quotes its cause does not also
+//! return it as `source()`: a chain printed whole (`{:#}`) says each thing once.
 
 /// Why a globe could not be built, or a request to it failed.
 #[derive(Debug, thiserror::Error)]
@@ -11,16 +12,15 @@ pub enum EngineError {
         what: &'static str,
         /// The source's location, as given.
         url: String,
-        /// What went wrong.
-        #[source]
+        /// What went wrong (part of the message, not a separate source: printed once).
         error: globus_stream::fetch::OpenError,
     },
     /// The HTTP settings cannot be sent (control characters in a header, say).
     #[error("HTTP settings: {0}")]
-    Http(#[source] globus_stream::fetch::OpenError),
+    Http(globus_stream::fetch::OpenError),
     /// The layers opened but cannot be combined into a terrain source.
     #[error("the terrain and imagery layers cannot be combined: {0}")]
-    Layers(#[source] globus_stream::fetch::OpenError),
+    Layers(globus_stream::fetch::OpenError),
     /// The memory budget cannot hold the process and a usable cache and pool.
     #[error(
         "a memory budget of {total_mib} MiB is too small: this process and its frame already hold \

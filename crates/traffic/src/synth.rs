@@ -64,9 +64,16 @@ pub enum SynthError {
         /// The record's length.
         hours: f64,
     },
-    /// Writing the record failed.
+    /// Writing the record failed (the message quotes the cause, which is not also its
+    /// `source()`).
     #[error("cannot write the record: {0}")]
-    Write(#[from] std::io::Error),
+    Write(std::io::Error),
+}
+
+impl From<std::io::Error> for SynthError {
+    fn from(e: std::io::Error) -> Self {
+        Self::Write(e)
+    }
 }
 
 /// One airport from `airports.csv`.

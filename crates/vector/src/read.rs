@@ -54,15 +54,16 @@ pub struct ReadSummary {
     pub stopped: Option<String>,
 }
 
-/// Why one record of a file is not a feature.
+/// Why one record of a file is not a feature. Messages quote their cause, which is not also
+/// their `source()`: a chain printed whole says it once.
 #[derive(Debug, thiserror::Error)]
 pub enum FeatureError {
     /// An RFC 8142 record that is not JSON.
     #[error("not JSON: {0}")]
-    NotJson(#[from] serde_json::Error),
+    NotJson(serde_json::Error),
     /// JSON that the `geojson` crate does not take as a feature or geometry.
     #[error("{0}")]
-    GeoJson(#[from] Box<geojson::Error>),
+    GeoJson(Box<geojson::Error>),
     /// An object of another type.
     #[error("a {0:?}, not a Feature")]
     NotAFeature(String),
@@ -72,6 +73,18 @@ pub enum FeatureError {
     /// An airspace shape that is not an object with a `polygon`.
     #[error("a shape {0}")]
     Shape(&'static str),
+}
+
+impl From<serde_json::Error> for FeatureError {
+    fn from(e: serde_json::Error) -> Self {
+        Self::NotJson(e)
+    }
+}
+
+impl From<Box<geojson::Error>> for FeatureError {
+    fn from(e: Box<geojson::Error>) -> Self {
+        Self::GeoJson(e)
+    }
 }
 
 /// One feature as read, or why it is not one.

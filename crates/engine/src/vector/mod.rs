@@ -458,8 +458,15 @@ struct Icons {
 enum IconError {
     #[error(transparent)]
     Read(#[from] std::io::Error),
+    /// (The message quotes the cause, which is not also its `source()`.)
     #[error("not a PNG we can read: {0}")]
-    Decode(#[from] image::ImageError),
+    Decode(image::ImageError),
+}
+
+impl From<image::ImageError> for IconError {
+    fn from(e: image::ImageError) -> Self {
+        Self::Decode(e)
+    }
 }
 
 /// Most icons a layer holds.
