@@ -58,6 +58,13 @@ pub struct GlobeArgs {
     /// Screen-space error bound in pixels (default 2).
     #[arg(long)]
     pub sse: Option<f64>,
+    /// Hold this frame rate: the error bound rises from --sse while frames are slower and
+    /// falls back with headroom (the viewer's title and bench --path show it).
+    #[arg(long = "target-fps", value_name = "FPS")]
+    pub target_fps: Option<f64>,
+    /// The coarsest error bound --target-fps may raise the bound to, pixels (default 4x --sse).
+    #[arg(long = "sse-max", value_name = "PX")]
+    pub sse_max: Option<f64>,
     /// An elevation layer: a `globus tile` directory, .mbtiles or .pmtiles file, a served
     /// directory URL, or an http(s) URL template with options after '#'
     /// (e.g. 'https://host/{z}/{x}/{y}.png#encoding=terrarium&maxzoom=15'). Repeatable;
@@ -401,6 +408,21 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     let sse = builder.error_bound_px();
     if !(globus_engine::MIN_SSE_PX..=1000.0).contains(&sse) {
         bail!("--sse {sse}: the error bound must be a pixel error from 0.1 to 1000");
+    }
+    if let Some(fps) = a.target_fps {
+        builder.target_fps(Some(fps));
+    }
+    if let Some(px) = a.sse_max {
+        builder.coarsest_sse_px(px);
+    }
+    if let Some(fps) = builder.target_frame_rate()
+        && !(fps > 0.0 && fps <= 1000.0)
+    {
+        bail!("--target-fps {fps} must be above 0 and at most 1000 frames per second");
+    }
+    let coarsest = builder.coarsest_px();
+    if !(sse..=1000.0).contains(&coarsest) {
+        bail!("--sse-max {coarsest} must be from the error bound ({sse} px) to 1000 pixels");
     }
     if !(a.fov_deg > 0.5 && a.fov_deg < 170.0) {
         bail!(

@@ -4,6 +4,8 @@
 //!
 //! ```toml
 //! sse = 2.0                 # screen-space error bound, pixels
+//! target_fps = 30           # hold 30 frames per second: the bound rises while slower
+//! sse_max = 8.0             #   but never past 8 px (default 4 x sse)
 //! memory_mb = 1024          # everything Globus holds, CPU and GPU: sizes the caches below
 //! # cache_mb = 512          # or size the two big parts yourself (not with memory_mb):
 //! # gpu_tiles = 1024        #   loaded tiles kept in RAM, tile slots in the GPU pools
@@ -58,6 +60,10 @@ use globus_engine::GlobeBuilder;
 pub struct Config {
     /// Screen-space error bound, pixels.
     pub sse: Option<f64>,
+    /// A frame rate to hold ([`GlobeBuilder::target_fps`]).
+    pub target_fps: Option<f64>,
+    /// The coarsest error bound the frame rate may raise the bound to, pixels.
+    pub sse_max: Option<f64>,
     /// One budget for all memory, MiB ([`globus_engine::memory`]).
     pub memory_mb: Option<u64>,
     /// CPU cache budget, MiB.
@@ -213,6 +219,16 @@ impl Config {
         {
             bail!("sse = {s} must be from 0.1 to 1000 pixels");
         }
+        if let Some(f) = self.target_fps
+            && !(f > 0.0 && f <= 1000.0)
+        {
+            bail!("target_fps = {f} must be above 0 and at most 1000 frames per second");
+        }
+        if let Some(m) = self.sse_max
+            && !(m >= self.sse.unwrap_or(globus_engine::MIN_SSE_PX) && m <= 1000.0)
+        {
+            bail!("sse_max = {m} must be from sse to 1000 pixels");
+        }
         if self.gpu_tiles == Some(0)
             || self.workers == Some(0)
             || self.cache_mb == Some(0)
@@ -279,6 +295,12 @@ impl Config {
     pub fn apply(&self, builder: &mut GlobeBuilder) {
         if let Some(s) = self.sse {
             builder.max_sse_px(s);
+        }
+        if let Some(f) = self.target_fps {
+            builder.target_fps(Some(f));
+        }
+        if let Some(m) = self.sse_max {
+            builder.coarsest_sse_px(m);
         }
         if let Some(mb) = self.memory_mb {
             builder.memory_budget(Some(mb.saturating_mul(1 << 20)));
@@ -347,6 +369,8 @@ mod tests {
         let c = parse(
             r#"
             sse = 3.5
+            target_fps = 30
+            sse_max = 9
             cache_mb = 256
             gpu_tiles = 512
             workers = 12
@@ -373,6 +397,7 @@ mod tests {
         let mut o = GlobeBuilder::new();
         c.apply(&mut o);
         assert_eq!(o.error_bound_px(), 3.5);
+        assert_eq!((o.target_frame_rate(), o.coarsest_px()), (Some(30.0), 9.0));
         assert_eq!(o.tile_cache_bytes(), 256 << 20);
         assert!(c.sizes_caches() && o.memory_budget_bytes().is_none());
         let mut m = GlobeBuilder::new();
@@ -416,6 +441,10 @@ mod tests {
             "request_lookahead_frames = nan",
             "exaggeration = -1",
             "exaggeration = 1e9",
+            "target_fps = 0",
+            "target_fps = nan",
+            "sse = 4\nsse_max = 2",
+            "sse_max = 1e9",
             "memory_mb = 0",
             "memory_mb = 512\ncache_mb = 256",
             "memory_mb = 512\ngpu_tiles = 256",

@@ -15,8 +15,9 @@
 //! halve its speed, a click on an aircraft selects it (printed as one JSON line), C makes the
 //! camera follow the selected aircraft (again: stop following).
 //!
-//! The title shows frames per second, tiles drawn and tiles loading (and the replay's moment,
-//! speed and aircraft).
+//! The title shows frames per second (with `--target-fps`, the target and the error bound
+//! that holds it), tiles drawn and tiles loading (and the replay's moment, speed and
+//! aircraft).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -585,6 +586,8 @@ impl State {
         let now = Instant::now();
         let dt = now - self.last_tick;
         self.last_tick = now;
+        // From one frame's start to the next's: what a target frame rate is held to.
+        self.globe.frame_time(dt.as_secs_f64());
         self.controller.update(&self.globe, dt);
         let axis = |plus: KeyCode, minus: KeyCode| {
             f64::from(u8::from(self.keys.contains(&plus)))
@@ -670,8 +673,16 @@ impl State {
                     self.controller.height_above_ground_m(&self.globe)
                 ),
             };
+            // With a target frame rate, the error bound it holds the frames to.
+            let quality = self.globe.quality().map_or(String::new(), |q| {
+                format!(
+                    " (target {:.0}, error {:.1} px)",
+                    1.0 / q.options().target_frame_s,
+                    report.sse_bound_px
+                )
+            });
             self.window.set_title(&format!(
-                "Globus | {:.1} fps | {} tiles drawn | {} loading | {} imagery loading | \
+                "Globus | {:.1} fps{quality} | {} tiles drawn | {} loading | {} imagery loading | \
                  {scale}{traffic}",
                 self.fps.fps, report.draw.tiles, report.wanted, report.colours_pending,
             ));

@@ -196,6 +196,14 @@ fn bad_arguments_end_with_one_clear_line() {
             "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --exaggeration -2",
             "--exaggeration",
         ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --target-fps 0",
+            "--target-fps",
+        ),
+        (
+            "render --camera 0,0,1000,0,0 --size 64x64 --out OUT --sse 4 --sse-max 3",
+            "--sse-max",
+        ),
     ];
     for (args, needle) in cases {
         let args: Vec<&str> = args
@@ -221,6 +229,39 @@ fn bench_refuses_a_path_of_more_frames_than_it_replays() {
         &["bench", "--path", path.to_str().unwrap(), "--size", "64x64"],
         &["frames", "at most 1000000"],
     );
+    std::fs::remove_file(&path).ok();
+}
+
+/// A frame rate no renderer reaches here (1,000 fps): the bound rises from --sse towards
+/// --sse-max and never past it, and the report says so frame by frame.
+#[test]
+fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
+    let path = std::env::temp_dir().join(format!("globus-fps-path-{}.json", std::process::id()));
+    std::fs::write(
+        &path,
+        r#"{"keyframes": [
+            {"t": 0, "lon": 7.6, "lat": 46, "alt": 40000, "heading": 0, "pitch": -30},
+            {"t": 6, "lon": 7.9, "lat": 46.2, "alt": 20000, "heading": 40, "pitch": -20}]}"#,
+    )
+    .unwrap();
+    let held = json(&globus(&[
+        "bench",
+        "--path",
+        path.to_str().unwrap(),
+        "--size",
+        "160x90",
+        "--target-fps",
+        "1000",
+        "--sse-max",
+        "6",
+    ]));
+    let bound = &held["sse_bound_px"];
+    let (median, max) = (
+        bound["median"].as_f64().unwrap(),
+        bound["max"].as_f64().unwrap(),
+    );
+    assert!(median > 2.5 && max <= 6.0, "{held}");
+    assert_eq!(held["target_fps"], 1000.0);
     std::fs::remove_file(&path).ok();
 }
 

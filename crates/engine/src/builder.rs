@@ -21,6 +21,7 @@ use globus_stream::{
 };
 use globus_terrain::MeshOptions;
 use globus_terrain::refine::RefineOptions;
+use globus_tiling::quality::{QualityError, QualityOptions};
 
 use crate::memory::SourceBudgets;
 use crate::{EngineError, Globe};
@@ -51,6 +52,8 @@ pub(crate) const GPU_POOL_FILL: f64 = 0.625;
 pub struct GlobeBuilder {
     seed: u64,
     max_sse_px: f64,
+    target_fps: Option<f64>,
+    coarsest_sse_px: Option<f64>,
     max_level: u8,
     gpu_slots: u32,
     uploads_per_frame: u32,
@@ -74,6 +77,8 @@ impl Default for GlobeBuilder {
         Self {
             seed: DEFAULT_SEED,
             max_sse_px: 2.0,
+            target_fps: None,
+            coarsest_sse_px: None,
             max_level: 26,
             gpu_slots: 1024,
             uploads_per_frame: 24,
@@ -124,6 +129,24 @@ impl GlobeBuilder {
     /// Screen-space error bound, pixels (default 2).
     pub fn max_sse_px(&mut self, px: f64) -> &mut Self {
         self.max_sse_px = px;
+        self
+    }
+
+    /// A frame rate to hold (none by default): the error bound then follows the frame times
+    /// the application reports ([`Globe::frame_time`]), rising from [`GlobeBuilder::max_sse_px`]
+    /// when frames are slower than `1 / fps` and falling back with headroom
+    /// ([`globus_tiling::quality`]), never past [`GlobeBuilder::coarsest_sse_px`].
+    ///
+    /// [`Globe::frame_time`]: crate::Globe::frame_time
+    pub fn target_fps(&mut self, fps: Option<f64>) -> &mut Self {
+        self.target_fps = fps;
+        self
+    }
+
+    /// The coarsest error bound a target frame rate may raise the bound to, pixels (default
+    /// four times [`GlobeBuilder::max_sse_px`]).
+    pub fn coarsest_sse_px(&mut self, px: f64) -> &mut Self {
+        self.coarsest_sse_px = Some(px);
         self
     }
 
@@ -373,6 +396,25 @@ impl GlobeBuilder {
                 "must be a pixel error from 0.1 to 1000",
             ));
         }
+        if let Some(fps) = self.target_fps {
+            self.quality_options()
+                .map_err(|e| EngineError::InvalidOption {
+                    option: "target frame rate",
+                    value: format!(
+                        "{fps} fps, {} to {} px",
+                        self.max_sse_px,
+                        self.coarsest_px()
+                    ),
+                    expected: match e {
+                        QualityError::TargetFps(_) => {
+                            "must be above 0 and at most 1000 frames per second"
+                        }
+                        QualityError::Range { .. } => {
+                            "needs a coarsest error bound at least the error bound, at most 1000 px"
+                        }
+                    },
+                })?;
+        }
         if !(0.0..=4.0).contains(&self.mesh.error_fraction) {
             return Err(invalid(
                 "mesh error",
@@ -456,6 +498,31 @@ impl GlobeBuilder {
         self.max_sse_px
     }
 
+    /// The frame rate to hold, if any.
+    pub fn target_frame_rate(&self) -> Option<f64> {
+        self.target_fps
+    }
+
+    /// The coarsest error bound a target frame rate may raise the bound to, pixels.
+    pub fn coarsest_px(&self) -> f64 {
+        self.coarsest_sse_px.unwrap_or(4.0 * self.max_sse_px)
+    }
+
+    /// The quality loop's settings for the target frame rate (none without one).
+    fn quality_options(&self) -> Result<Option<QualityOptions>, QualityError> {
+        let Some(fps) = self.target_fps else {
+            return Ok(None);
+        };
+        let coarsest = self.coarsest_px();
+        if coarsest > 1000.0 {
+            return Err(QualityError::Range {
+                min: self.max_sse_px,
+                max: coarsest,
+            });
+        }
+        QualityOptions::new(fps, self.max_sse_px, coarsest).map(Some)
+    }
+
     /// The memory budget, bytes, if there is one.
     pub fn memory_budget_bytes(&self) -> Option<u64> {
         self.memory_bytes
@@ -519,6 +586,8 @@ impl GlobeBuilder {
     pub(crate) fn settings(&self) -> Settings {
         Settings {
             max_sse_px: self.max_sse_px,
+            // Checked by `check` before any globe is built.
+            quality: self.quality_options().ok().flatten(),
             gpu_slots: self.gpu_slots,
             uploads_per_frame: self.uploads_per_frame,
             cache_bytes: self.cache_bytes,
@@ -558,6 +627,7 @@ impl GlobeBuilder {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Settings {
     pub max_sse_px: f64,
+    pub quality: Option<QualityOptions>,
     pub gpu_slots: u32,
     pub uploads_per_frame: u32,
     pub cache_bytes: usize,

@@ -26,6 +26,7 @@ use globus_render::{
     NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
 };
 use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
+use globus_tiling::quality::QualityLoop;
 use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, TileKey, select_into};
 
 use crate::builder::Settings;
@@ -126,6 +127,8 @@ pub struct Globe {
     plan: FramePlan,
     lighting: Option<Lighting>,
     relax_detail: bool,
+    /// The error bound under frame-time feedback, with a target frame rate.
+    quality: Option<QualityLoop>,
     request_lookahead_frames: f64,
     last_eye: Option<DVec3>,
     memory: Option<MemoryPlan>,
@@ -211,6 +214,7 @@ impl Globe {
             plan: FramePlan::default(),
             lighting: None,
             relax_detail: true,
+            quality: settings.quality.map(QualityLoop::new),
             request_lookahead_frames: settings.request_lookahead_frames,
             last_eye: None,
             memory,
@@ -483,17 +487,40 @@ impl Globe {
 
     /// When the GPU pool or the CPU cache cannot hold what the view needs, raise the error
     /// bound (less detail) instead of thrashing or growing; relax it again when there is
-    /// room (unless relaxing is off, as for offline frames, which must settle).
+    /// room (unless relaxing is off, as for offline frames, which must settle). The bound
+    /// relaxes down to the quality loop's, which follows the frame times.
     fn adapt_detail(&mut self, budget_bound: bool) {
         let capacity = f64::from(self.renderer.pool().capacity());
         // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
         let needed = self.selection.draw.len() as f64 * 4.0 / 3.0;
+        let floor = match (&self.quality, self.relax_detail) {
+            (Some(q), true) => q.sse_px(),
+            _ => self.settings.max_sse_px,
+        };
         let sse = &mut self.selection_options.max_sse_px;
         if needed > capacity * 0.9 || budget_bound {
             *sse *= 1.25;
-        } else if self.relax_detail && needed < capacity * 0.6 && *sse > self.settings.max_sse_px {
-            *sse = (*sse / 1.1).max(self.settings.max_sse_px);
+        } else if *sse < floor {
+            // The frame-time loop asks for less detail.
+            *sse = floor;
+        } else if self.relax_detail && needed < capacity * 0.6 && *sse > floor {
+            *sse = (*sse / 1.1).max(floor);
         }
+    }
+
+    /// Reports how long the last frame took, seconds (from one frame's start to the next's,
+    /// as a viewer measures it). With a target frame rate ([`GlobeBuilder::target_fps`]) the
+    /// error bound of the next frames follows: coarser while frames are slower than the
+    /// target, finer again with headroom. Without one it does nothing.
+    pub fn frame_time(&mut self, seconds: f64) {
+        if let Some(q) = self.quality.as_mut() {
+            q.record(seconds);
+        }
+    }
+
+    /// The frame-time loop, with a target frame rate: its bound and smoothed frame time.
+    pub fn quality(&self) -> Option<&QualityLoop> {
+        self.quality.as_ref()
     }
 
     /// Records the frame prepared by [`Globe::update`] into `encoder`, drawing into `colour`

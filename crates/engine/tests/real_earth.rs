@@ -138,7 +138,14 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     // so the others' data arrived.
     let stats = off.globe().layer().scheduler_stats();
     assert!(stats.retries >= 1, "{stats:?}");
-    assert_eq!(stats.failed, 1, "{stats:?}");
+    // A failed tile still wanted is asked again after its 30 s cool-down (the pyramid
+    // answers from its cache without a request), which a loaded CI machine can reach.
+    let cool_downs = (frame.load_ms / 30_000.0).floor() as u64;
+    assert!(
+        (1..=1 + cool_downs).contains(&stats.failed),
+        "{stats:?} in {} ms",
+        frame.load_ms
+    );
     assert!(
         server.count("/topo/1/1/0.png") >= 3,
         "two 503s and then the tile"

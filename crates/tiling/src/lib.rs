@@ -7,6 +7,8 @@
 //! * [`select`]: level-of-detail selection as a pure function of a [`globus_geo::View`] and a
 //!   [`TileOracle`] that knows each tile's bounds, geometric error and load state.
 //!
+//! * [`quality`]: the error bound under frame-time feedback towards a target frame rate.
+//!
 //! * [`files`]: outside files read safely (regular files only, never more than a cap).
 //!
 //! Angles are radians inside the crate; degrees appear only in naming helpers that say so.
@@ -15,6 +17,7 @@ mod bounds;
 pub mod files;
 mod key;
 pub mod pmtiles;
+pub mod quality;
 mod rect;
 mod scheme;
 pub mod select;

@@ -27,6 +27,7 @@ struct FrameSample {
     triangles: u64,
     tiles_wanted_not_drawable: u32,
     tiles_showing_ancestor_imagery: u32,
+    sse_bound_px: f64,
 }
 
 impl FrameSample {
@@ -41,6 +42,7 @@ impl FrameSample {
             triangles: r.draw.triangles,
             tiles_wanted_not_drawable: r.wanted,
             tiles_showing_ancestor_imagery: r.colours_pending,
+            sse_bound_px: r.sse_bound_px,
         }
     }
 
@@ -126,7 +128,10 @@ pub fn run(
             }
             None => off.draw(&mut []),
         }
-        samples.push(FrameSample::new(&r, started.elapsed().as_secs_f64() * 1e3));
+        let frame_s = started.elapsed().as_secs_f64();
+        // With --target-fps the next frames' error bound follows this one's cost.
+        off.globe_mut().frame_time(frame_s);
+        samples.push(FrameSample::new(&r, frame_s * 1e3));
         deferred += u64::from(r.requests_deferred);
     }
     let column = |f: fn(&FrameSample) -> f64| quantiles(samples.iter().map(f).collect());
@@ -145,6 +150,8 @@ pub fn run(
         "frames": frames,
         "size": [width, height],
         "sse_px": builder.error_bound_px(),
+        "target_fps": builder.target_frame_rate(),
+        "sse_bound_px": column(|s| s.sse_bound_px),
         "realtime": a.realtime,
         "wall_s": clock.elapsed().as_secs_f64(),
         "mesh_error": a.globe.mesh_error,
