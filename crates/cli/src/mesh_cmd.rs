@@ -173,7 +173,7 @@ fn quantize(
         })?,
     };
     let projection = match scheme {
-        TilingScheme::Geographic => TileProjection::Geographic,
+        TilingScheme::Geographic | TilingScheme::GeographicReduced => TileProjection::Geographic,
         TilingScheme::WebMercator => TileProjection::WebMercator,
     };
     // In a pyramid (the input is .../Z/X/Y.png), the neighbours' samples next to the shared

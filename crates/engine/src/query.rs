@@ -1,13 +1,12 @@
 //! Terrain queries against the loaded tiles: heights, normals and ray picks.
 //!
-//! Heights follow Kaiser (2018, 3.2.3): bilinear interpolation of four samples of one level,
-//! the finest whose four samples around the point are all loaded. The samples are addressed
-//! in the level's global grid (every engine tile is a corner grid of
-//! [`MESH_SEGMENTS`]` + 1` samples, neighbours sharing their edge samples), not through the
-//! tile that contains the point, so the answer depends only on the position and on what is
-//! loaded: the same on both sides of a tile edge, whichever tile might be asked. A sample on
-//! an edge is read from the tile to its east (south), or the one to its west (north) if that
-//! one is not loaded.
+//! Heights follow Kaiser (2018, 3.2.3): bilinear interpolation of four samples of the finest
+//! loaded tile containing the point (every engine tile is a corner grid of
+//! [`MESH_SEGMENTS`]` + 1` samples, neighbours of a level sharing their edge samples, but
+//! where a reduced polar row meets a row of narrower tiles, whose edge has twice the
+//! samples). A point on an edge belongs to the tile to its east (south), as
+//! [`GLOBE_SCHEME`]'s `tile_at` says, so the answer depends only on the position and on what
+//! is loaded.
 //!
 //! Normals come from heights around the point one sample spacing away (the eight-point fan
 //! of Kaiser 3.2.3 reduced to central differences), on the drawn (exaggerated) surface.
@@ -21,7 +20,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_stream::TerrainLayer;
 use globus_terrain::grid::MESH_SEGMENTS;
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::GLOBE_SCHEME;
 
 /// A height read from the loaded terrain.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,44 +48,11 @@ impl TerrainHeight {
     }
 }
 
-/// Samples per tile side minus one.
-const CELLS: u64 = MESH_SEGMENTS as u64;
-
-/// The height of one global sample of `level` and the geometric error of the tile it was
-/// read from: the tile that owns it or, on an edge, the neighbour that shares it.
-fn sample(layer: &TerrainLayer, level: u8, gi: u64, gj: u64) -> Option<(f32, f64)> {
-    let scheme = TilingScheme::Geographic;
-    let (ntx, nty) = (scheme.tiles_x(level), scheme.tiles_y(level));
-    let read = |tx: u64, ty: u64| {
-        let key = TileKey::try_new(level, tx as u32, ty as u32)?;
-        let data = layer.get(key)?;
-        let (i, j) = (gi - tx * CELLS, gj - ty * CELLS);
-        Some((
-            data.tile.height_at(i as i32, j as i32),
-            data.tile.geometric_error_m,
-        ))
-    };
-    let owner = |g: u64, n: u64| (g / CELLS).min(n - 1);
-    let (tx, ty) = (owner(gi, ntx), owner(gj, nty));
-    // Candidates: the owner, and the neighbours that share the sample on an edge.
-    let xs = [Some(tx), (tx > 0 && gi == tx * CELLS).then(|| tx - 1)];
-    let ys = [Some(ty), (ty > 0 && gj == ty * CELLS).then(|| ty - 1)];
-    for y in ys.into_iter().flatten() {
-        for x in xs.into_iter().flatten() {
-            if let Some(h) = read(x, y) {
-                return Some(h);
-            }
-        }
-    }
-    None
-}
-
 /// The deepest level whose tile containing the point is loaded (walking down from a root).
 fn deepest_loaded(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Option<u8> {
-    let scheme = TilingScheme::Geographic;
     let mut best = None;
     for level in 0..=layer.max_level() {
-        let key = scheme.tile_at(lon_rad, lat_rad, level)?;
+        let key = GLOBE_SCHEME.tile_at(lon_rad, lat_rad, level)?;
         if layer.get(key).is_none() {
             break;
         }
@@ -111,44 +77,24 @@ pub(crate) fn height_at(layer: &TerrainLayer, lon_rad: f64, lat_rad: f64) -> Opt
         return None;
     }
     let deepest = deepest_loaded(layer, lon_rad, lat_rad)?;
-    let scheme = TilingScheme::Geographic;
-    for level in (0..=deepest).rev() {
-        let cols = scheme.tiles_x(level) * CELLS;
-        let rows = scheme.tiles_y(level) * CELLS;
-        let x = ((lon_rad + PI) / (2.0 * PI)).clamp(0.0, 1.0) * cols as f64;
-        let y = ((FRAC_PI_2 - lat_rad) / PI).clamp(0.0, 1.0) * rows as f64;
-        let (i0, j0) = (
-            (x.floor() as u64).min(cols - 1),
-            (y.floor() as u64).min(rows - 1),
-        );
-        let (fx, fy) = (x - i0 as f64, y - j0 as f64);
-        let corners = [(i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)];
-        let mut h = [0.0f64; 4];
-        let mut error_m: f64 = 0.0;
-        let mut complete = true;
-        for (k, &(gi, gj)) in corners.iter().enumerate() {
-            match sample(layer, level, gi, gj) {
-                Some((v, e)) => {
-                    h[k] = f64::from(v);
-                    error_m = error_m.max(e);
-                }
-                None => {
-                    complete = false;
-                    break;
-                }
-            }
-        }
-        if complete {
-            let top = h[0] * (1.0 - fx) + h[1] * fx;
-            let bottom = h[2] * (1.0 - fx) + h[3] * fx;
-            return Some(TerrainHeight {
-                height_m: top * (1.0 - fy) + bottom * fy,
-                level,
-                error_m,
-            });
-        }
-    }
-    None
+    let key = GLOBE_SCHEME.tile_at(lon_rad, lat_rad, deepest)?;
+    let data = layer.get(key)?;
+    let (u, v) = data.tile.rect.uv(lon_rad, lat_rad);
+    let cells = f64::from(MESH_SEGMENTS);
+    let (x, y) = ((u * cells).clamp(0.0, cells), (v * cells).clamp(0.0, cells));
+    let (i0, j0) = (
+        (x.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
+        (y.floor() as i32).min(MESH_SEGMENTS as i32 - 1),
+    );
+    let (fx, fy) = (x - f64::from(i0), y - f64::from(j0));
+    let h = |i: i32, j: i32| f64::from(data.tile.height_at(i, j));
+    let top = h(i0, j0) * (1.0 - fx) + h(i0 + 1, j0) * fx;
+    let bottom = h(i0, j0 + 1) * (1.0 - fx) + h(i0 + 1, j0 + 1) * fx;
+    Some(TerrainHeight {
+        height_m: top * (1.0 - fy) + bottom * fy,
+        level: deepest,
+        error_m: data.tile.geometric_error_m,
+    })
 }
 
 /// The unit normal of the drawn surface (heights times `exaggeration`) at a longitude and
@@ -161,8 +107,7 @@ pub(crate) fn normal_at(
     lat_rad: f64,
 ) -> Option<DVec3> {
     let centre = height_at(layer, lon_rad, lat_rad)?;
-    let scheme = TilingScheme::Geographic;
-    let step = PI / (scheme.tiles_y(centre.level) * CELLS) as f64;
+    let step = PI / (GLOBE_SCHEME.tiles_y(centre.level) * u64::from(MESH_SEGMENTS)) as f64;
     let point = |lon: f64, lat: f64| {
         let lat = lat.clamp(-FRAC_PI_2, FRAC_PI_2);
         let h = height_at(layer, lon, lat).map_or(centre.height_m, |t| t.height_m);

@@ -7,7 +7,7 @@ mod common;
 use std::time::Duration;
 
 use globus_engine::{CameraSpec, Cartographic, DVec3, Ellipsoid, GlobeBuilder, Headless};
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileKey};
 
 const TIMEOUT: Duration = Duration::from_secs(240);
 
@@ -70,7 +70,7 @@ fn heights_match_the_srtm_tile_and_agree_across_tile_edges() {
     let hgt = Hgt::read();
     let off = srtm_globe(1.0);
     let globe = off.globe();
-    let scheme = TilingScheme::Geographic;
+    let scheme = GLOBE_SCHEME;
     let (mut worst_excess, mut sum, mut n) = (f64::NEG_INFINITY, 0.0, 0);
     let mut deepest = 0;
     for i in 0..=20 {
@@ -103,7 +103,11 @@ fn heights_match_the_srtm_tile_and_agree_across_tile_edges() {
         "a height is {worst_excess:.2} m further from the SRTM tile than its tile's error"
     );
     assert!(deepest >= 11, "deepest level {deepest}: too coarse to tell");
-    assert!(rms < 5.0, "rms {rms:.2} m from the SRTM tile");
+    // At 57.7 N a reduced tile spans two geographic columns: its cells are about square on
+    // the ground, no longer half as wide as tall, so 1-arcsecond data (31 x 17 m here) is
+    // sampled a little more coarsely east-west at the same level (rms 5.01 m; each height
+    // still within its tile's error, above).
+    assert!(rms < 6.0, "rms {rms:.2} m from the SRTM tile");
 
     // Along the edges of the tile under the centre, whose neighbours are loaded at the same
     // level: the answer does not depend on the side a point is approached from.
@@ -146,8 +150,10 @@ fn heights_match_the_srtm_tile_and_agree_across_tile_edges() {
             edges_checked += 1;
         }
     }
+    // (Reduced tiles at 57.7 N are twice as wide: fewer neighbours share the centre tile's
+    // level in this 320 x 240 view, 9 of the 36 edge points.)
     assert!(
-        edges_checked >= 12,
+        edges_checked >= 8,
         "only {edges_checked} edge points had neighbours"
     );
 }
@@ -248,9 +254,7 @@ fn exaggeration_raises_meshes_bounds_and_culling_together() {
     // Every loaded tile's vertices stand at 100 times their heights (the edge vertices: no
     // grid sample is dropped there), inside the tile's bounds.
     let layer = raised.globe().layer();
-    let key = TilingScheme::Geographic
-        .tile_at(lon, lat, b.level())
-        .expect("tile");
+    let key = GLOBE_SCHEME.tile_at(lon, lat, b.level()).expect("tile");
     let data = layer.get(key).expect("loaded");
     let mesh = &data.mesh;
     let mut checked = 0;
@@ -324,7 +328,7 @@ fn a_hundredfold_exaggeration_never_culls_a_visible_tile() {
     assert!(frame.complete);
     let globe = off.globe();
     let drawn: Vec<TileKey> = globe.drawn_tiles().iter().map(|d| d.key).collect();
-    let scheme = TilingScheme::Geographic;
+    let scheme = GLOBE_SCHEME;
     let e = globe.ellipsoid();
     let (mut seen, mut beyond_plain_horizon) = (0, 0);
     for y in (0..h).step_by(6) {

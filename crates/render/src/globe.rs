@@ -199,7 +199,7 @@ impl GlobeRenderer {
             offset_buffer,
             offsets: vec![[0.0; 4]; slots as usize],
             colour_map_buffer,
-            colour_maps: vec![[1.0, 0.0, 0.0, 0.0]; slots as usize],
+            colour_maps: vec![[1.0, 1.0, 0.0, 0.0]; slots as usize],
             indirect_buffer,
             indirect_capacity,
             draws: Vec::new(),
@@ -254,23 +254,27 @@ impl GlobeRenderer {
             };
             // The one place a planet-sized number becomes f32: after the f64 subtraction.
             let offset = (r.centre - view.position).as_vec3();
-            self.offsets[r.slot as usize] = [offset.x, offset.y, offset.z, 0.0];
             let slot = r.slot;
-            self.colour_maps[slot as usize] = match self.pool.colour_source(key) {
+            let (map, layer) = match self.pool.colour_source(key) {
                 Some(c) => {
                     borrowed_colour += u32::from(c.from != key);
-                    [
-                        c.scale as f32,
-                        c.offset[0] as f32,
-                        c.offset[1] as f32,
-                        c.layer as f32,
-                    ]
+                    (
+                        [
+                            c.scale[0] as f32,
+                            c.scale[1] as f32,
+                            c.offset[0] as f32,
+                            c.offset[1] as f32,
+                        ],
+                        c.layer,
+                    )
                 }
                 None => {
                     missing_colour += 1;
-                    [1.0, 0.0, 0.0, slot as f32]
+                    ([1.0, 1.0, 0.0, 0.0], slot)
                 }
             };
+            self.offsets[slot as usize] = [offset.x, offset.y, offset.z, layer as f32];
+            self.colour_maps[slot as usize] = map;
             let index_count = r.indices.len() as u32;
             triangles += u64::from(index_count / 3);
             self.draws.push(DrawIndexedArgs {

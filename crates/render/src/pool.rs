@@ -23,7 +23,7 @@ use std::ops::Range;
 use globus_geo::DVec3;
 use globus_terrain::grid::COLOUR_SIZE;
 use globus_terrain::{ColourImage, TerrainVertex, TileMesh};
-use globus_tiling::TileKey;
+use globus_tiling::{GLOBE_SCHEME, TileKey};
 use rustc_hash::FxHashMap;
 
 use crate::ranges::RangeAllocator;
@@ -125,15 +125,17 @@ pub struct Resident {
 }
 
 /// Where a tile's fragments read their colour: a layer of the colour pool, and the part of
-/// that layer over the tile (`uv * scale + offset`; v grows southwards, as in tiles).
+/// that layer over the tile (`uv * scale + offset`, per axis; v grows southwards, as in
+/// tiles).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ColourSource {
     /// The tile whose colour is read (the tile itself or an ancestor).
     pub from: TileKey,
     /// Its colour layer.
     pub layer: u32,
-    /// Size of the tile in the layer's texture coordinates (1 for its own colour).
-    pub scale: f64,
+    /// Size of the tile in the layer's texture coordinates, u and v (1 for its own colour;
+    /// an ancestor in a reduced polar row may be halved in v only).
+    pub scale: [f64; 2],
     /// Texture coordinates of the tile's north-west corner in the layer.
     pub offset: [f64; 2],
 }
@@ -181,25 +183,34 @@ impl Residency {
 
     /// Where `key` reads its colour: its own layer once it has its colour, else the nearest
     /// resident ancestor's that has, cropped and scaled to `key`'s rectangle. `None` if
-    /// neither exists. Quadtree keys of one scheme: a tile `d` levels below its ancestor
-    /// covers `1 / 2^d` of it in each direction.
+    /// neither exists. Keys of the engine's tiles ([`GLOBE_SCHEME`]): the part is the tile's
+    /// rectangle in its ancestor's, which in a reduced polar row may keep its whole width.
     pub fn colour_source(&self, key: TileKey) -> Option<ColourSource> {
         let mut from = key;
         loop {
             if let Some(r) = self.get(from)
                 && r.own_colour
             {
-                let depth = u32::from(key.level() - from.level());
-                let n = (1u64 << depth) as f64;
-                let corner = |k: u32, a: u32| (u64::from(k) - (u64::from(a) << depth)) as f64 / n;
+                if from == key {
+                    return Some(ColourSource {
+                        from,
+                        layer: r.slot,
+                        scale: [1.0, 1.0],
+                        offset: [0.0, 0.0],
+                    });
+                }
+                let (own, of) = (GLOBE_SCHEME.rect(key), GLOBE_SCHEME.rect(from));
                 return Some(ColourSource {
                     from,
                     layer: r.slot,
-                    scale: 1.0 / n,
-                    offset: [corner(key.x(), from.x()), corner(key.y(), from.y())],
+                    scale: [own.width() / of.width(), own.height() / of.height()],
+                    offset: [
+                        (own.west - of.west) / of.width(),
+                        (of.north - own.north) / of.height(),
+                    ],
                 });
             }
-            from = from.parent()?;
+            from = GLOBE_SCHEME.parent(from)?;
         }
     }
 
@@ -651,25 +662,42 @@ mod tests {
         let s = r.colour_source(tile).expect("the root's");
         assert_eq!(s.from, root);
         // Level 6 tile 109 of the root's 64 columns 64..128, row 42 of 64.
-        assert_eq!(s.scale, 1.0 / 64.0);
-        assert_eq!(s.offset, [45.0 / 64.0, 42.0 / 64.0]);
+        let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-12;
+        assert!(near(s.scale, [1.0 / 64.0; 2]), "{s:?}");
+        assert!(near(s.offset, [45.0 / 64.0, 42.0 / 64.0]), "{s:?}");
         r.set_own_colour(parent);
         let s = r.colour_source(tile).expect("the parent's");
         assert_eq!(
             (s.from, s.layer),
             (parent, r.get(parent).expect("resident").slot)
         );
-        assert_eq!(s.scale, 0.125);
-        assert_eq!(s.offset, [5.0 / 8.0, 2.0 / 8.0]);
+        assert!(near(s.scale, [0.125; 2]), "{s:?}");
+        assert!(near(s.offset, [5.0 / 8.0, 2.0 / 8.0]), "{s:?}");
         // The tile's own colour wins; a tile reads its own layer unscaled.
         r.set_own_colour(tile);
         let s = r.colour_source(tile).expect("its own");
-        assert_eq!((s.from, s.scale, s.offset), (tile, 1.0, [0.0, 0.0]));
+        assert_eq!((s.from, s.scale, s.offset), (tile, [1.0; 2], [0.0, 0.0]));
         // A tile not resident at all borrows too (the renderer never draws it, but the
         // answer is still right).
         let cousin = TileKey::new(4, 27, 11);
         let s = r.colour_source(cousin).expect("the parent's");
-        assert_eq!((s.from, s.scale, s.offset), (parent, 0.5, [0.5, 0.5]));
+        assert_eq!(s.from, parent);
+        assert!(
+            near(s.scale, [0.5; 2]) && near(s.offset, [0.5, 0.5]),
+            "{s:?}"
+        );
+        // A polar tile whose row stays whole below its parent borrows the parent's whole
+        // width and half its height.
+        let polar = TileKey::new(8, 0, 0);
+        let whole = TileKey::new(9, 0, 0);
+        assert_eq!(GLOBE_SCHEME.parent(whole), Some(polar));
+        assert!(r.place(polar, 10, 30, DVec3::ZERO, &mut evicted).is_some());
+        r.set_own_colour(polar);
+        let s = r.colour_source(whole).expect("the polar parent's");
+        assert!(
+            near(s.scale, [1.0, 0.5]) && near(s.offset, [0.0, 0.0]),
+            "{s:?}"
+        );
     }
 
     #[test]

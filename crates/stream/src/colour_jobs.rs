@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use globus_terrain::ColourImage;
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileKey, TilingScheme};
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::fetch::Cancel;
@@ -86,7 +86,7 @@ impl TileSource for ColourJobs {
     }
 
     fn scheme(&self) -> TilingScheme {
-        TilingScheme::Geographic
+        GLOBE_SCHEME
     }
 
     fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<ColourImage>, SourceError> {

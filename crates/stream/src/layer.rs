@@ -23,7 +23,8 @@ use globus_terrain::ColourImage;
 
 use globus_geo::Ellipsoid;
 use globus_tiling::{
-    DrawTile, TileBounds, TileInfo, TileKey, TileOracle, TileRequest, TileState, TilingScheme,
+    DrawTile, GLOBE_SCHEME, TileBounds, TileInfo, TileKey, TileOracle, TileRequest, TileState,
+    TilingScheme,
 };
 use rustc_hash::{FxHashMap, FxHashSet};
 
@@ -173,7 +174,7 @@ impl TerrainLayer {
             max_level,
             frame: 0,
         };
-        for &root in TilingScheme::Geographic.roots() {
+        for &root in GLOBE_SCHEME.roots() {
             let node = layer.estimate(root);
             layer.nodes.insert(root, node);
         }
@@ -404,9 +405,10 @@ impl TerrainLayer {
                     error_m: data.lod_error_m(),
                     state: TileState::Loaded,
                 };
-                if let Some(children) = key.children() {
+                let children = GLOBE_SCHEME.children(key);
+                if !children.is_empty() {
                     let child_error = node.error_m * 0.5;
-                    for (i, child) in children.into_iter().enumerate() {
+                    for (i, &child) in children.iter().enumerate() {
                         let estimate = Node {
                             bounds: data.child_bounds[i],
                             error_m: child_error,
@@ -452,8 +454,8 @@ impl TerrainLayer {
     /// Drops an evicted tile's record, keeping an estimate if its parent is still loaded,
     /// and the estimates of its children (nobody can reach them any more).
     fn forget(&mut self, key: TileKey) {
-        if let Some(children) = key.children() {
-            for child in children {
+        {
+            for &child in GLOBE_SCHEME.children(key).iter() {
                 if self
                     .nodes
                     .get(&child)
@@ -464,7 +466,9 @@ impl TerrainLayer {
                 }
             }
         }
-        let parent_loaded = key.parent().is_some_and(|p| self.cache.contains(p));
+        let parent_loaded = GLOBE_SCHEME
+            .parent(key)
+            .is_some_and(|p| self.cache.contains(p));
         if key.level() == 0 || parent_loaded {
             let estimate = self.estimate(key);
             self.nodes.insert(key, estimate);
@@ -476,18 +480,22 @@ impl TerrainLayer {
     /// An estimated record for an unloaded tile: bounds from the parent's heights if it is
     /// loaded, else from the rectangle and the source's height range.
     fn estimate(&self, key: TileKey) -> Node {
-        let parent = key.parent().and_then(|p| self.get(p));
-        let bounds = match parent {
-            Some(p) => p.child_bounds[key.child_index()],
-            None => {
-                let rect = TilingScheme::Geographic.rect(key);
+        let parent = GLOBE_SCHEME
+            .parent(key)
+            .and_then(|p| Some((p, self.get(p)?)));
+        let index = parent.and_then(|(p, _)| GLOBE_SCHEME.children(p).position(key));
+        let parent = parent.map(|(_, data)| data);
+        let bounds = match (parent, index) {
+            (Some(p), Some(i)) => p.child_bounds[i],
+            _ => {
+                let rect = GLOBE_SCHEME.rect(key);
                 let (lo, hi) = self.height_range_m;
                 TileBounds::from_rect(&self.ellipsoid, &self.occluder, &rect, lo, hi)
             }
         };
         let error_m = match parent {
             Some(p) => p.lod_error_m() * 0.5,
-            None => TilingScheme::Geographic.rect(key).height() * self.ellipsoid.mean_radius(),
+            None => GLOBE_SCHEME.rect(key).height() * self.ellipsoid.mean_radius(),
         };
         Node {
             bounds,
@@ -525,7 +533,7 @@ impl TerrainLayer {
 
 impl TileOracle for TerrainLayer {
     fn scheme(&self) -> TilingScheme {
-        TilingScheme::Geographic
+        GLOBE_SCHEME
     }
 
     fn tile(&self, key: TileKey) -> TileInfo {

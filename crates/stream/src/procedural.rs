@@ -2,7 +2,7 @@
 
 use globus_geo::Ellipsoid;
 use globus_terrain::{MeshOptions, ProceduralPlanet, TerrainTile};
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileKey, TilingScheme};
 
 use crate::fetch::Cancel;
 use crate::{SourceError, TerrainData, TerrainSource, TileSource};
@@ -80,11 +80,11 @@ impl TileSource for ProceduralSource {
     }
 
     fn scheme(&self) -> TilingScheme {
-        TilingScheme::Geographic
+        GLOBE_SCHEME
     }
 
     fn load(&self, key: TileKey, _cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-        if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
+        if key.level() > self.max_level || !GLOBE_SCHEME.is_valid(key) {
             return Ok(None);
         }
         Ok(Some(self.prepare(self.planet.generate_tile(key))))

@@ -50,7 +50,7 @@ impl PyramidSpec {
     /// The same level before clamping to the pyramid's (may be negative or beyond them).
     pub fn ideal_level(&self, spacing_rad: f64) -> i32 {
         let span0 = match self.scheme {
-            TilingScheme::Geographic => PI,
+            TilingScheme::Geographic | TilingScheme::GeographicReduced => PI,
             TilingScheme::WebMercator => 2.0 * PI,
         };
         let per_tile =
@@ -68,7 +68,7 @@ impl PyramidSpec {
         let ny = self.scheme.tiles_y(level) as f64;
         let fx = ((lon_rad + PI) / (2.0 * PI)).clamp(0.0, 1.0) * nx;
         let fy = match self.scheme {
-            TilingScheme::Geographic => (PI / 2.0 - lat_rad) / PI,
+            TilingScheme::Geographic | TilingScheme::GeographicReduced => (PI / 2.0 - lat_rad) / PI,
             TilingScheme::WebMercator => lat_to_mercator_y(lat_rad.clamp(-1.5, 1.5)),
         }
         .clamp(0.0, 1.0)

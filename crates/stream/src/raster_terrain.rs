@@ -27,7 +27,7 @@ use globus_terrain::grid::{
     COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, mesh_bulge_m, mesh_height_at,
 };
 use globus_terrain::{ColourImage, MeshOptions, TerrainTile};
-use globus_tiling::{GeoRect, TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, GeoRect, TileKey, TilingScheme};
 use rustc_hash::FxHashMap;
 
 use crate::decode::{HeightImage, Rgba};
@@ -94,7 +94,7 @@ fn feather(r: &GeoRect, lon: f64, lat: f64) -> f64 {
 fn finest_spacing(p: &RasterPyramid<impl Samples>) -> f64 {
     let s = p.spec();
     let span0 = match s.scheme {
-        TilingScheme::Geographic => std::f64::consts::PI,
+        TilingScheme::Geographic | TilingScheme::GeographicReduced => std::f64::consts::PI,
         TilingScheme::WebMercator => 2.0 * std::f64::consts::PI,
     };
     let per_tile = s.tile_size.max(2) - u32::from(s.grid == crate::pyramid::SampleGrid::Corners);
@@ -382,7 +382,7 @@ impl RasterTerrainSource {
     }
 
     fn build(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainTile>, FetchError> {
-        let rect = TilingScheme::Geographic.rect(key);
+        let rect = GLOBE_SCHEME.rect(key);
         let Some((fine, ring)) = self.heights(key, &rect, cancel)? else {
             return Ok(None);
         };
@@ -653,11 +653,11 @@ impl TileSource for RasterTerrainSource {
     }
 
     fn scheme(&self) -> TilingScheme {
-        TilingScheme::Geographic
+        GLOBE_SCHEME
     }
 
     fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-        if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
+        if key.level() > self.max_level || !GLOBE_SCHEME.is_valid(key) {
             return Ok(None);
         }
         let tile = self.build(key, cancel).map_err(|e| self.fail(key, e))?;
@@ -674,7 +674,7 @@ impl TileSource for RasterTerrainSource {
 
 impl TerrainSource for RasterTerrainSource {
     fn has_imagery_for(&self, key: TileKey) -> bool {
-        !self.imagery.is_empty() && self.imagery_detailed(&TilingScheme::Geographic.rect(key))
+        !self.imagery.is_empty() && self.imagery_detailed(&GLOBE_SCHEME.rect(key))
     }
 
     fn load_colour(

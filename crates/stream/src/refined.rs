@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 use globus_geo::Ellipsoid;
 use globus_terrain::refine::{RefineOptions, Refiner};
 use globus_terrain::{MeshOptions, TerrainTile};
-use globus_tiling::{TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileKey, TilingScheme};
 
 use crate::cache::LruCache;
 use crate::fetch::Cancel;
@@ -75,7 +75,7 @@ impl RefinedSource {
     ) -> Result<Option<Arc<TerrainTile>>, SourceError> {
         let mut level = self.data_level.min(key.level());
         loop {
-            let Some(candidate) = key.ancestor_at(level) else {
+            let Some(candidate) = GLOBE_SCHEME.ancestor_at(key, level) else {
                 return Ok(None);
             };
             if let Some(found) = self.cached_base(candidate) {
@@ -141,11 +141,11 @@ impl TileSource for RefinedSource {
     }
 
     fn scheme(&self) -> TilingScheme {
-        TilingScheme::Geographic
+        GLOBE_SCHEME
     }
 
     fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-        if key.level() > self.max_level || !TilingScheme::Geographic.is_valid(key) {
+        if key.level() > self.max_level || !GLOBE_SCHEME.is_valid(key) {
             return Ok(None);
         }
         if key.level() <= self.data_level {
@@ -241,10 +241,13 @@ impl TerrainSource for RefinedSource {
     fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
         // Only bases already loaded: this runs on the render thread, and the inner source may
         // be a network service.
-        let key = TilingScheme::Geographic.tile_at(lon_rad, lat_rad, self.data_level)?;
+        let key = GLOBE_SCHEME.tile_at(lon_rad, lat_rad, self.data_level)?;
         let base = (0..=self.data_level)
             .rev()
-            .filter_map(|level| self.cached_base(key.ancestor_at(level)?).flatten())
+            .filter_map(|level| {
+                self.cached_base(GLOBE_SCHEME.ancestor_at(key, level)?)
+                    .flatten()
+            })
             .next();
         let Some(base) = base else {
             return self.inner.height_at(lon_rad, lat_rad);
@@ -320,10 +323,10 @@ mod tests {
             "holey"
         }
         fn scheme(&self) -> TilingScheme {
-            TilingScheme::Geographic
+            GLOBE_SCHEME
         }
         fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-            if self.1.contains(key) {
+            if GLOBE_SCHEME.contains(self.1, key) {
                 return Ok(None);
             }
             self.0.load(key, cancel)

@@ -3,7 +3,7 @@
 use globus_geo::Ellipsoid;
 use globus_terrain::grid::MESH_SEGMENTS;
 use globus_terrain::{MeshOptions, TerrainTile, TileMesh};
-use globus_tiling::{TileBounds, TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileBounds, TileKey, TilingScheme};
 
 use crate::fetch::Cancel;
 
@@ -116,8 +116,8 @@ pub struct TerrainData {
     pub tile: TerrainTile,
     /// Vertices and exact bounds.
     pub mesh: TileMesh,
-    /// Bounds for children NW, NE, SW, SE, from this tile's heights in each quadrant widened
-    /// by this tile's geometric error.
+    /// Bounds of the children in [`GLOBE_SCHEME`]'s order, from this tile's heights over
+    /// each child's part widened by this tile's geometric error ([`child_bounds`]).
     pub child_bounds: [TileBounds; 4],
     /// Made here (procedural planet, refinement below the data) rather than from data
     /// fetched for it: no request was sent for this tile.
@@ -165,33 +165,40 @@ impl TerrainData {
     }
 }
 
-/// Conservative bounds of the four children from the parent's heights in each quadrant:
+/// Conservative bounds of the children (in [`GLOBE_SCHEME`]'s order: four, or three where
+/// a polar row stays whole) from the parent's heights over each child's part of its grid:
 /// children stay within the parent's geometric error of its mesh, and their skirts hang a
 /// few errors lower. Heights and errors are raised by `exaggeration`, as the meshes are.
+/// Unused entries repeat the parent's own bounds.
 pub fn child_bounds(
     tile: &TerrainTile,
     ellipsoid: &Ellipsoid,
     occluder: &Ellipsoid,
     exaggeration: f64,
 ) -> [TileBounds; 4] {
-    let half = (MESH_SEGMENTS / 2) as i32;
     let e = exaggeration;
-    let Some(children) = tile.key.children() else {
-        let b = TileBounds::from_rect(
-            ellipsoid,
-            occluder,
-            &tile.rect,
-            tile.min_height_m * e,
-            tile.max_height_m * e,
-        );
-        return [b; 4];
-    };
+    let own = TileBounds::from_rect(
+        ellipsoid,
+        occluder,
+        &tile.rect,
+        tile.min_height_m * e,
+        tile.max_height_m * e,
+    );
+    let mut out = [own; 4];
     let spacing_m = tile.rect.height() / f64::from(MESH_SEGMENTS) * ellipsoid.mean_radius();
-    children.map(|child| {
-        let (qx, qy) = ((child.x() & 1) as i32, (child.y() & 1) as i32);
+    let cells = f64::from(MESH_SEGMENTS);
+    for (slot, &child) in out.iter_mut().zip(GLOBE_SCHEME.children(tile.key).iter()) {
+        let rect = GLOBE_SCHEME.rect(child);
+        // The child's rectangle in the parent's grid (a half or the whole of each axis),
+        // widened to whole cells.
+        let (u0, v0) = tile.rect.uv(rect.west, rect.north);
+        let (u1, v1) = tile.rect.uv(rect.east, rect.south);
+        let index = |f: f64, round: fn(f64) -> f64| (round(f * cells).clamp(0.0, cells)) as i32;
+        let (i0, i1) = (index(u0, f64::floor), index(u1, f64::ceil));
+        let (j0, j1) = (index(v0, f64::floor), index(v1, f64::ceil));
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for j in qy * half..=(qy + 1) * half {
-            for i in qx * half..=(qx + 1) * half {
+        for j in j0..=j1 {
+            for i in i0..=i1 {
                 let h = f64::from(tile.height_at(i, j));
                 lo = lo.min(h);
                 hi = hi.max(h);
@@ -199,13 +206,13 @@ pub fn child_bounds(
         }
         let margin = tile.geometric_error_m * e.max(1.0);
         let skirt = 4.0 * margin + 0.02 * spacing_m;
-        let rect = TilingScheme::Geographic.rect(child);
-        TileBounds::from_rect(
+        *slot = TileBounds::from_rect(
             ellipsoid,
             occluder,
             &rect,
             lo * e - margin - skirt,
             hi * e + margin,
-        )
-    })
+        );
+    }
+    out
 }

@@ -22,7 +22,7 @@ use globus_terrain::MeshOptions;
 use globus_test_support::http::{Fault, FaultServer};
 use globus_test_support::shared_data;
 use globus_tiler::{ElevationEncoding, JobKind, TileJob};
-use globus_tiling::{TileKey, TileRequest, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, TileKey, TileRequest, TilingScheme};
 
 const MAX_LEVEL: u8 = 7;
 
@@ -234,7 +234,12 @@ fn every_fault_ends_as_a_counted_tile_failure_and_the_rest_completes() {
         .expect("source"),
     );
 
-    let keys = keys_in(&dir);
+    // The pyramid's tiles that are engine tiles too (reduced rows at 57 N span two columns:
+    // an engine tile reads its own data tile and the one to its east, never faulted).
+    let keys: Vec<TileKey> = keys_in(&dir)
+        .into_iter()
+        .filter(|k| GLOBE_SCHEME.is_valid(*k))
+        .collect();
     let url = |k: TileKey| format!("/dem/{}/{}/{}.png", k.level(), k.x(), k.y());
     // One fault per tile, on the deeper tiles; the rest load normally.
     let faults = [
@@ -394,9 +399,11 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
     let cancel = Cancel::new();
     // The level-10 tile holding 57.7 N 11.95 E (Gothenburg): the Swedish west coast (0-200 m),
     // real relief (not flat), and an error bound that is measured, not zero.
-    let key = TilingScheme::Geographic
+    let key = GLOBE_SCHEME
         .tile_at(11.95f64.to_radians(), 57.7f64.to_radians(), 10)
         .expect("key");
+    let columns = GLOBE_SCHEME.columns(10, key.y());
+    assert_eq!(columns, GLOBE_SCHEME.columns(10, key.y() + 1));
     let t = source.load(key, &cancel).expect("load").expect("data");
     assert!(
         t.tile.min_height_m >= -50.0 && t.tile.max_height_m < 400.0,
@@ -416,7 +423,7 @@ fn terrain_tiles_from_a_pyramid_carry_its_heights() {
     let g = globus_terrain::grid::HEIGHT_GRID_SIDE;
     let at = |t: &globus_stream::TerrainData, i: usize, j: usize| t.tile.heights_m[j * g + i];
     let east = source
-        .load(TileKey::new(10, key.x() + 1, key.y()), &cancel)
+        .load(TileKey::new(10, key.x() + columns, key.y()), &cancel)
         .expect("load")
         .expect("east neighbour");
     let south = source
@@ -843,11 +850,19 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
     let region = globus_tiling::GeoRect::from_degrees(8.0, 54.0, 14.0, 60.0);
     let geo = TilingScheme::Geographic;
     let engine = |lon: f64, lat: f64| {
-        geo.tile_at(lon.to_radians(), lat.to_radians(), 7)
+        GLOBE_SCHEME
+            .tile_at(lon.to_radians(), lat.to_radians(), 7)
             .expect("key")
     };
     let (a, b, c) = (engine(10.0, 58.5), engine(11.5, 58.5), engine(10.0, 57.0));
-    let nw = |k: TileKey| TileKey::new(8, 2 * k.x(), 2 * k.y());
+    // The level-8 imagery tile under the texel `quadrant_texel` reads (a quarter of the way
+    // into the tile, which at 58 N spans two geographic columns).
+    let nw = |k: TileKey| {
+        let (lon, lat) = GLOBE_SCHEME
+            .rect(k)
+            .lon_lat_at(0.25 + 0.5 / 128.0, 0.25 + 0.5 / 128.0);
+        geo.tile_at(lon, lat, 8).expect("imagery key")
+    };
     // Holes: one imagery tile missing, one broken (not an image).
     let (missing, broken) = (nw(b), nw(c));
     write_pyramid(
@@ -878,9 +893,9 @@ fn imagery_deeper_than_terrain_reaches_refined_tiles_and_falls_back_to_ancestors
     );
     let cancel = Cancel::new();
     let imagery_requests = |level: u8| server.count(&format!("/img/{level}/"));
-    // 64-pixel imagery at level 8 matches 128-texel engine tiles at level 7: the north-west
-    // quadrant of engine tile 7/x/y shows imagery tile 8/2x/2y, real colour, two levels
-    // below the terrain's data.
+    // 64-pixel imagery at level 8 matches 128-texel engine tiles at level 7: a texel in the
+    // north-west quadrant of engine tile 7/x/y shows the level-8 imagery tile under it, real
+    // colour, two levels below the terrain's data.
     for (key, want_from) in [
         (a, nw(a)),
         // Missing: the level-7 imagery tile over it, cropped and scaled.
@@ -971,8 +986,9 @@ fn web_mercator_imagery_leaves_no_hole_or_smear_at_the_poles() {
     let cancel = Cancel::new();
     for (key, want) in [
         // Geographic level 2 tiles touching the north and south poles (45..90 degrees).
-        (TileKey::new(2, 3, 0), [128u8, 128, 0]),
-        (TileKey::new(2, 5, 3), [255, 255, 255]),
+        // (Engine tiles: the polar rows span two columns.)
+        (TileKey::new(2, 2, 0), [128u8, 128, 0]),
+        (TileKey::new(2, 4, 3), [255, 255, 255]),
     ] {
         let t = source.load(key, &cancel).expect("load").expect("tile");
         // Below the roots imagery is a load of its own.

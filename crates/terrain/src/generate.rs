@@ -21,7 +21,7 @@
 //! keeps that true for the interpolated part as well.
 
 use globus_geo::{Cartographic, DVec3};
-use globus_tiling::{GeoRect, TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, GeoRect, TileKey};
 
 use crate::biome::{self, Surface};
 use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
@@ -157,9 +157,9 @@ pub(crate) fn lerp_exact(a: f64, b: f64, t: f64) -> f64 {
 }
 
 impl ProceduralPlanet {
-    /// Generates the terrain tile `key` of the geographic tiling scheme.
+    /// Generates the engine's terrain tile `key` ([`GLOBE_SCHEME`]).
     pub fn generate_tile(&self, key: TileKey) -> TerrainTile {
-        let rect = TilingScheme::Geographic.rect(key);
+        let rect = GLOBE_SCHEME.rect(key);
         let tile_ns_m = rect.height() * self.ellipsoid().mean_radius();
         let plan = OctavePlan::for_tile(self, tile_ns_m);
         let coarse_pts = self.grid_points(&rect, COARSE_LO, COARSE_SIDE, MESH_SEGMENTS as i32);

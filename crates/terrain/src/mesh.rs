@@ -19,7 +19,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid};
-use globus_tiling::{TileBounds, TileKey};
+use globus_tiling::{GLOBE_SCHEME, TileBounds, TileKey};
 
 use crate::TerrainTile;
 use crate::adaptive::{AdaptiveMesh, HeightGrid, Rtin};
@@ -122,10 +122,13 @@ impl TileMesh {
         };
         let spacing_m = rect.height() / n * ellipsoid.mean_radius();
         let (adaptive, cut_error_m) = cut(tile, spacing_m, ellipsoid.mean_radius(), options);
+        // A reduced polar tile's neighbour across its north or south edge may be twice as
+        // wide and a level coarser, with up to eight times its error, not four.
+        let reduced = GLOBE_SCHEME.columns(tile.key.level(), tile.key.y()) > 1;
+        let error_factor = SKIRT_ERROR_FACTOR * if reduced { 2.0 } else { 1.0 };
         let geometric_error_m = tile.geometric_error_m + cut_error_m;
         // Drawn metres: cracks between neighbours are differences of exaggerated heights.
-        let skirt_depth_m =
-            SKIRT_ERROR_FACTOR * geometric_error_m * exaggeration + 0.02 * spacing_m;
+        let skirt_depth_m = error_factor * geometric_error_m * exaggeration + 0.02 * spacing_m;
 
         let edges = adaptive.edge_vertices();
         let surface = adaptive.vertices.len();
@@ -138,11 +141,22 @@ impl TileMesh {
                 (i, j, true)
             }));
         }
+        let (equatorward_row, push) = equatorward_push(tile, &adaptive, &edges, reduced);
         let mut points = Vec::with_capacity(grid_of.len());
         let mut normals = Vec::with_capacity(grid_of.len());
         for &(i, j, skirt) in &grid_of {
+            let mut p = position(
+                i32::from(i),
+                i32::from(j),
+                if skirt { -skirt_depth_m } else { 0.0 },
+            );
+            if j == equatorward_row {
+                let f = push[usize::from(i)];
+                p.x *= f;
+                p.y *= f;
+            }
             let (i, j) = (i32::from(i), i32::from(j));
-            points.push(position(i, j, if skirt { -skirt_depth_m } else { 0.0 }));
+            points.push(p);
             let east = position(i + 1, j, 0.0) - position(i - 1, j, 0.0);
             let south = position(i, j + 1, 0.0) - position(i, j - 1, 0.0);
             let up = ellipsoid.geodetic_normal_from_lon_lat(lon_at(i), lat_at(j));
@@ -195,6 +209,62 @@ impl TileMesh {
     }
 }
 
+/// A tile's north and south edges as a parallel's circle curves sideways under them: the
+/// radius of that circle at the tile's equatorward edge (where it is widest), the width of
+/// one grid cell there, and the stride (grid cells, a power of two) at which the edges keep
+/// their samples so that a chord strays at most half `budget` from the circle.
+fn parallel_edges(tile: &TerrainTile, radius_m: f64, budget: f64) -> (f64, f64, u16) {
+    let rect = &tile.rect;
+    let equatorward = if rect.north > 0.0 && rect.south < 0.0 {
+        0.0
+    } else {
+        rect.north.abs().min(rect.south.abs())
+    };
+    let parallel_m = radius_m * equatorward.cos();
+    let cell_width_m = rect.width() / f64::from(MESH_SEGMENTS) * parallel_m;
+    // A chord across L cells strays (L w)^2 / (8 r) inside the circle.
+    let leg = (4.0 * parallel_m * budget.max(0.0)).sqrt() / cell_width_m.max(f64::MIN_POSITIVE);
+    let stride = 1u16 << (leg.max(1.0).log2().floor() as u32).min(5);
+    (parallel_m, cell_width_m, stride)
+}
+
+/// The row of a reduced tile's edge nearer the equator, and per grid column the factor its
+/// vertices there move away from the polar axis by: `1 / cos(d / 2)` for the longer of the
+/// chords `d` (radians of longitude) beside them, so that every chord of that edge reaches
+/// the parallel instead of cutting inside it. The neighbour across that edge, narrower or
+/// finer, has shorter chords: without this a lens between the two chords (12 m across and
+/// 1.9 km long for the level-9 polar row against level-10 tiles) let rays grazing along
+/// the edge slip under both surfaces; now the two overlap by at most the chord's sagitta,
+/// which the edge's sample stride keeps within half the mesh's error budget. Tiles that
+/// are not reduced meet neighbours of their own width: factors 1.
+fn equatorward_push(
+    tile: &TerrainTile,
+    mesh: &AdaptiveMesh,
+    edges: &[Vec<u32>; 4],
+    reduced: bool,
+) -> (u16, Vec<f64>) {
+    let last = MESH_SEGMENTS as u16;
+    let north_hemisphere = tile.rect.south >= 0.0;
+    let (row, edge) = if north_hemisphere {
+        (last, &edges[2])
+    } else {
+        (0, &edges[0])
+    };
+    let mut push = vec![1.0; MESH_SIDE as usize];
+    if !reduced || (tile.rect.north > 0.0 && tile.rect.south < 0.0) {
+        return (row, push);
+    }
+    let xs: Vec<u16> = edge.iter().map(|&v| mesh.vertices[v as usize][0]).collect();
+    let cell = tile.rect.width() / f64::from(MESH_SEGMENTS);
+    for (k, &x) in xs.iter().enumerate() {
+        let before = k.checked_sub(1).map_or(0, |p| x - xs[p]);
+        let after = xs.get(k + 1).map_or(0, |&n| n - x);
+        let d = f64::from(before.max(after)) * cell;
+        push[usize::from(x)] = 1.0 / (d * 0.5).cos();
+    }
+    (row, push)
+}
+
 /// The tile's grid cut to `options`, and the vertical error the cut adds (heights plus the
 /// sagitta of the body under its longest triangle legs).
 fn cut(
@@ -221,6 +291,17 @@ fn cut(
     let max_leg = ((2.0 * radius_m * budget).sqrt() / spacing_m)
         .floor()
         .clamp(1.0, f64::from(MESH_SEGMENTS)) as u16;
+    // Along a parallel the surface also curves sideways, round a circle of radius R cos(lat):
+    // near a pole far tighter than R, and a reduced polar tile is wide. A north or south
+    // edge's chord strays inside that circle where a narrower neighbour's chords do not: a
+    // gap a vertical skirt closes only from the side. Keep those edges' samples at a stride
+    // whose chords stray at most half the budget (the skirts cover what is left).
+    let (_, _, stride) = parallel_edges(tile, radius_m, budget);
+    let mut rtin = rtin;
+    if stride < max_leg {
+        let last = MESH_SEGMENTS as u16;
+        rtin.require(|x, y| (y == 0 || y == last) && x % stride == 0);
+    }
     let mesh = rtin.mesh_with(budget * 0.5, max_leg);
     // Longest edge (a right triangle's hypotenuse), grid cells.
     let longest = mesh
@@ -361,7 +442,7 @@ mod tests {
     fn triangles_face_outwards() {
         for key in [
             TileKey::new(5, 33, 10),
-            TileKey::new(2, 3, 0),
+            TileKey::new(2, 2, 0),
             TileKey::new(16, 70_000, 16_000),
         ] {
             for options in [MeshOptions::default(), MeshOptions::FULL_GRID] {

@@ -27,7 +27,7 @@
 //!   measured interpolation error): LOD transitions do not jump.
 
 use globus_geo::{Cartographic, Ellipsoid};
-use globus_tiling::{GeoRect, TileKey, TilingScheme};
+use globus_tiling::{GLOBE_SCHEME, GeoRect, TileKey};
 
 use crate::generate::{catmull_rom, lerp_exact};
 use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, mesh_height_at};
@@ -200,10 +200,10 @@ impl Refiner {
         &self.options
     }
 
-    /// The tile `key` (geographic scheme) invented below `base`, one of its ancestors.
+    /// The tile `key` ([`GLOBE_SCHEME`]) invented below `base`, one of its ancestors.
     pub fn refine(&self, base: &TerrainTile, key: TileKey) -> Result<TerrainTile, RefineError> {
         let depth = key.level().saturating_sub(base.key.level());
-        if depth == 0 || key.ancestor_at(base.key.level()) != Some(base.key) {
+        if depth == 0 || GLOBE_SCHEME.ancestor_at(key, base.key.level()) != Some(base.key) {
             return Err(RefineError::NotADescendant {
                 key,
                 base: base.key,
@@ -223,7 +223,7 @@ impl Refiner {
         // Octave k is introduced at depth k + 1.
         let included = usize::from(depth).min(OCTAVES);
         let q = 2f64.powf(-self.options.hurst);
-        let rect = TilingScheme::Geographic.rect(key);
+        let rect = GLOBE_SCHEME.rect(key);
         let n = f64::from(MESH_SEGMENTS);
         let lon_at = |i: f64| lerp_exact(rect.west, rect.east, i / n);
         let lat_at = |j: f64| lerp_exact(rect.north, rect.south, j / n);

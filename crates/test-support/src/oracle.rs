@@ -104,7 +104,7 @@ impl TileOracle for MemoryOracle {
     }
 
     fn tile(&self, key: TileKey) -> TileInfo {
-        let state = if self.no_data.iter().any(|n| n.contains(key)) {
+        let state = if self.no_data.iter().any(|n| self.scheme.contains(*n, key)) {
             TileState::NoData
         } else if self.is_loaded(key) {
             TileState::Loaded

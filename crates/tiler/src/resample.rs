@@ -61,7 +61,9 @@ pub fn sample_lats(scheme: TilingScheme, key: TileKey, grid: SampleGrid, n: usiz
                 return rect.south;
             }
             match scheme {
-                TilingScheme::Geographic => rect.north - f * rect.height(),
+                TilingScheme::Geographic | TilingScheme::GeographicReduced => {
+                    rect.north - f * rect.height()
+                }
                 TilingScheme::WebMercator => mercator_y_to_lat((f64::from(key.y()) + f) / ny),
             }
         })

@@ -59,6 +59,11 @@ impl TileKey {
         }
     }
 
+    /// A key from parts known to fit (for schemes deriving keys from valid ones).
+    pub(crate) const fn pack_unchecked(level: u8, x: u32, y: u32) -> Self {
+        Self::pack(level, x, y)
+    }
+
     const fn pack(level: u8, x: u32, y: u32) -> Self {
         Self(((level as u64) << (X_BITS + Y_BITS)) | ((x as u64) << Y_BITS) | y as u64)
     }

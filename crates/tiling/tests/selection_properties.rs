@@ -46,6 +46,28 @@ fn camera() -> impl Strategy<Value = Camera> {
         )
 }
 
+/// Cameras near and over either pole, or across the antimeridian, at every altitude.
+fn polar_camera() -> impl Strategy<Value = Camera> {
+    (
+        camera(),
+        0.0f64..12.0,
+        prop::bool::ANY,
+        -3.0f64..3.0,
+        prop::bool::ANY,
+    )
+        .prop_map(|(mut c, from_pole, north, lon, antimeridian)| {
+            c.lat = if north {
+                90.0 - from_pole
+            } else {
+                from_pole - 90.0
+            };
+            if antimeridian {
+                c.lon = if lon < 0.0 { -180.0 - lon } else { 180.0 - lon };
+            }
+            c
+        })
+}
+
 fn view_of(c: &Camera) -> View {
     let view = |pitch: f64| {
         View::from_geodetic(
@@ -109,7 +131,7 @@ fn check_invariants(
     // No overlaps: no drawn tile has a drawn ancestor.
     for d in &sel.draw {
         let mut k = d.key;
-        while let Some(p) = k.parent() {
+        while let Some(p) = scheme.parent(k) {
             prop_assert!(
                 !drawn.contains(&p),
                 "{:?} and its ancestor {:?} both drawn",
@@ -152,7 +174,8 @@ fn check_invariants(
             && d.key.level() < options.max_level
             && oracle.tile(d.key).has_children
         {
-            let children = d.key.children().expect("below max level");
+            let children = scheme.children(d.key);
+            prop_assert!(!children.is_empty());
             prop_assert!(
                 children.iter().any(|c| requested.contains(c)),
                 "{:?} has sse {} but no child requested",
@@ -168,7 +191,7 @@ fn check_invariants(
     }
     for r in &sel.requests {
         prop_assert!(!oracle.is_loaded(r.key));
-        if let Some(p) = r.key.parent() {
+        if let Some(p) = scheme.parent(r.key) {
             prop_assert!(
                 drawn.contains(&p),
                 "{:?} requested but parent not drawn",
@@ -198,6 +221,37 @@ proptest! {
     #[test]
     fn geographic_loaded_to_a_level(cam in camera(), level in 0u8..8) {
         check_invariants(TilingScheme::Geographic, &cam, LoadRule::UpToLevel(level))?;
+    }
+
+    #[test]
+    fn reduced_all_loaded(cam in camera()) {
+        check_invariants(TilingScheme::GeographicReduced, &cam, LoadRule::All)?;
+    }
+
+    #[test]
+    fn reduced_partially_loaded(cam in camera(), p in 0.0f64..1.0, seed in any::<u64>()) {
+        check_invariants(
+            TilingScheme::GeographicReduced,
+            &cam,
+            LoadRule::Random { probability: p, seed },
+        )?;
+    }
+
+    #[test]
+    fn reduced_near_the_poles_and_the_antimeridian(
+        cam in polar_camera(),
+        p in 0.3f64..1.0,
+        seed in any::<u64>(),
+        level in 0u8..9,
+    ) {
+        check_invariants(TilingScheme::GeographicReduced, &cam, LoadRule::All)?;
+        check_invariants(
+            TilingScheme::GeographicReduced,
+            &cam,
+            LoadRule::Random { probability: p, seed },
+        )?;
+        check_invariants(TilingScheme::GeographicReduced, &cam, LoadRule::UpToLevel(level))?;
+        check_invariants(TilingScheme::Geographic, &cam, LoadRule::Random { probability: p, seed })?;
     }
 
     #[test]

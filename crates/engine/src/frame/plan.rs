@@ -7,7 +7,7 @@
 use globus_geo::{DVec3, Frustum, Intersection, View};
 use globus_render::Residency;
 use globus_stream::TerrainLayer;
-use globus_tiling::{Selection, TileKey, TileOracle, TileRequest};
+use globus_tiling::{GLOBE_SCHEME, Selection, TileKey, TileOracle, TileRequest};
 use rustc_hash::FxHashSet;
 
 /// What one frame does with the selection's wishes.
@@ -53,7 +53,7 @@ impl FramePlan {
                 && self.seen.insert(k)
             {
                 self.in_use.push(k);
-                key = k.parent();
+                key = GLOBE_SCHEME.parent(k);
             }
         }
         self.to_upload.clear();
@@ -69,7 +69,8 @@ impl FramePlan {
             layer,
             motion,
             |key| {
-                std::iter::successors(key.parent(), |k| k.parent()).any(|k| layer.get(k).is_some())
+                std::iter::successors(GLOBE_SCHEME.parent(key), |k| GLOBE_SCHEME.parent(*k))
+                    .any(|k| layer.get(k).is_some())
             },
             &mut self.to_load,
         );
@@ -111,7 +112,7 @@ mod tests {
 
     use globus_geo::{Cartographic, Ellipsoid};
     use globus_stream::{ProceduralSource, TerrainLayerOptions};
-    use globus_tiling::{DrawTile, TilingScheme};
+    use globus_tiling::DrawTile;
 
     /// A camera 10 km up looking north 30 degrees down, flying north at 20 km a frame: a
     /// wanted tile just inside the bottom of the view is left behind within three frames and
@@ -134,9 +135,7 @@ mod tests {
         );
         let north_by = |km: f64| -> TileKey {
             let lat = eye.lat_rad + km * 1000.0 / 6_371_000.0;
-            TilingScheme::Geographic
-                .tile_at(eye.lon_rad, lat, 12)
-                .expect("tile")
+            GLOBE_SCHEME.tile_at(eye.lon_rad, lat, 12).expect("tile")
         };
         let (behind, ahead) = (north_by(9.0), north_by(100.0));
         // Both are in today's view.
@@ -229,7 +228,9 @@ mod tests {
         );
         // a and b share their parent (5/10/7 and 5/11/7 are siblings) and everything above.
         let mut expected: Vec<TileKey> = vec![a, b];
-        expected.extend(std::iter::successors(a.parent(), |k| k.parent()));
+        expected.extend(std::iter::successors(GLOBE_SCHEME.parent(a), |k| {
+            GLOBE_SCHEME.parent(*k)
+        }));
         let mut got = plan.in_use.clone();
         got.sort_by_key(|k| (k.level(), k.x(), k.y()));
         expected.sort_by_key(|k| (k.level(), k.x(), k.y()));

@@ -8,7 +8,7 @@
 
 use globus_render::TilePool;
 use globus_stream::{TerrainLayer, TileColour};
-use globus_tiling::{DrawTile, TileKey};
+use globus_tiling::{DrawTile, GLOBE_SCHEME, TileKey};
 
 use super::plan::FramePlan;
 
@@ -97,7 +97,7 @@ fn colour_to_borrow(
         pool.touch(source.from);
         return true;
     }
-    let Some(root) = key.ancestor_at(0) else {
+    let Some(root) = GLOBE_SCHEME.ancestor_at(key, 0) else {
         return false;
     };
     let (Some(data), Some(TileColour::Ready(colour))) = (layer.get(root), layer.colour(root))

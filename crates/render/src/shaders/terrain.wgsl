@@ -17,10 +17,11 @@ struct VsIn {
 }
 
 // Per slot: tile centre minus eye position, metres (f64 on the CPU, rounded once).
+// Per slot: the tile centre's offset from the eye, and its colour layer.
 @group(1) @binding(0) var<storage, read> offsets: array<vec4<f32>>;
 @group(1) @binding(1) var colours: texture_2d_array<f32>;
 @group(1) @binding(2) var colour_sampler: sampler;
-// Per slot: uv scale, uv offset (u, v), colour layer.
+// Per slot: uv scale (u, v), uv offset (u, v): the tile's part of its colour layer.
 @group(1) @binding(3) var<storage, read> colour_maps: array<vec4<f32>>;
 
 struct VsOut {
@@ -37,10 +38,10 @@ fn vs_main(v: VsIn) -> VsOut {
     var out: VsOut;
     out.clip = frame.clip_from_eye * vec4<f32>(eye_offset, 1.0);
     let map = colour_maps[v.slot];
-    out.uv = v.uv * map.x + map.yz;
+    out.uv = v.uv * map.xy + map.zw;
     out.normal = decode_oct(v.normal_oct);
     out.eye_offset = eye_offset;
-    out.layer = u32(map.w + 0.5);
+    out.layer = u32(offsets[v.slot].w + 0.5);
     return out;
 }
 

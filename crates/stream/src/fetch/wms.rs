@@ -74,7 +74,7 @@ impl WmsFetch {
             WmsVersion::V1_3_0 => ("CRS", "1.3.0"),
         };
         let (crs, bbox) = match self.scheme {
-            TilingScheme::Geographic => {
+            TilingScheme::Geographic | TilingScheme::GeographicReduced => {
                 let b = match self.version {
                     WmsVersion::V1_1_1 => [w, s, e, n],
                     WmsVersion::V1_3_0 => [s, w, n, e],

@@ -77,6 +77,60 @@ impl Rtin {
         self.rounding_m = 8.0 * f32::EPSILON * highest;
     }
 
+    /// Makes every mesh keep the samples `keep(x, y)` names (grid columns and rows), and
+    /// with them whatever keeps the mesh conforming: their stored errors become infinite and
+    /// every midpoint above them in the hierarchy takes the largest of its children again.
+    /// A tile keeps its north and south edges' samples this way where a chord across a
+    /// polar parallel would stray sideways from a neighbour's.
+    pub fn require(&mut self, keep: impl Fn(u16, u16) -> bool) {
+        let side = self.side;
+        if side < 3 {
+            return;
+        }
+        let n = (side - 1) as u16;
+        let mut changed = false;
+        for (k, e) in self.errors.iter_mut().enumerate() {
+            if keep((k % side) as u16, (k / side) as u16) {
+                *e = f32::INFINITY;
+                changed = true;
+            }
+        }
+        if !changed {
+            return;
+        }
+        let at = |x: u16, y: u16| u32::from(y) * side as u32 + u32::from(x);
+        let (nw, ne, sw, se) = (at(0, 0), at(n, 0), at(0, n), at(n, n));
+        // A midpoint is shared by the two triangles of its diamond, and depth first visits
+        // one of them before the other's subtree is done: repeat until nothing rises.
+        loop {
+            let mut rose = false;
+            self.lift(nw, se, ne, n, true, &mut rose);
+            self.lift(se, nw, sw, n, true, &mut rose);
+            if !rose {
+                break;
+            }
+        }
+    }
+
+    /// The largest stored error in the subtree of triangle (a, b, c) (as in
+    /// [`MeshBuilder::split`]), raising its midpoint's to it.
+    fn lift(&mut self, a: u32, b: u32, c: u32, leg: u16, diagonal: bool, rose: &mut bool) -> f32 {
+        if leg <= 1 {
+            return 0.0;
+        }
+        let m = (a + b) / 2;
+        let child = if diagonal { leg } else { leg / 2 };
+        let below = self
+            .lift(c, a, m, child, !diagonal, rose)
+            .max(self.lift(b, c, m, child, !diagonal, rose));
+        let e = &mut self.errors[m as usize];
+        if below > *e {
+            *e = below;
+            *rose = true;
+        }
+        *e
+    }
+
     /// Samples per side of the grid.
     pub fn side(&self) -> usize {
         self.side
@@ -244,6 +298,41 @@ mod tests {
         let mesh = Rtin::new(&grid).mesh(1e-3);
         assert_eq!(mesh.triangles.len(), 2);
         assert!(mesh.max_error(&grid) < 1e-4);
+    }
+
+    #[test]
+    fn required_samples_are_kept_and_the_mesh_stays_conforming() {
+        // A flat grid: without requirements two triangles.
+        let side = 33;
+        let grid = HeightGrid::new(side, vec![0.0; side * side]).expect("grid");
+        let mut rtin = Rtin::new(&grid);
+        assert_eq!(rtin.mesh(1.0).triangles.len(), 2);
+        // Keep every sample of the north and south edges.
+        rtin.require(|_, y| y == 0 || y == 32);
+        let mesh = rtin.mesh(1.0);
+        for x in 0..=32u16 {
+            for y in [0u16, 32] {
+                assert!(mesh.vertices.contains(&[x, y]), "({x}, {y}) dropped");
+            }
+        }
+        // Far fewer triangles than the full grid's 2048: the interior stays coarse.
+        assert!(mesh.triangles.len() < 700, "{}", mesh.triangles.len());
+        // Conforming: every edge is shared by two triangles or lies on the border.
+        let mut edges = std::collections::HashMap::new();
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        for (&(a, b), &count) in &edges {
+            let (p, q) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
+            let border = |c: usize| p[c] == q[c] && (p[c] == 0 || p[c] == 32);
+            assert!(
+                count == 2 || (count == 1 && (border(0) || border(1))),
+                "edge {p:?}-{q:?} used {count} times"
+            );
+        }
     }
 
     #[test]

@@ -52,7 +52,7 @@ impl PyramidMetadata {
             "encoding": self.encoding,
             "scheme": self.scheme.name(),
             "crs": match self.scheme {
-                TilingScheme::Geographic => "EPSG:4326",
+                TilingScheme::Geographic | TilingScheme::GeographicReduced => "EPSG:4326",
                 TilingScheme::WebMercator => "EPSG:3857",
             },
             "tile_size": self.tile_size,

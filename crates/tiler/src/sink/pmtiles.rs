@@ -112,7 +112,7 @@ impl PmTilesSink {
             path: path.to_owned(),
             partial,
             level_offset: match scheme {
-                TilingScheme::Geographic => 1,
+                TilingScheme::Geographic | TilingScheme::GeographicReduced => 1,
                 TilingScheme::WebMercator => 0,
             },
             state: Mutex::new(Stored {

@@ -92,7 +92,7 @@ pub fn corner_lon(x: u32, i: usize, n: usize, nx: f64) -> f64 {
 pub fn corner_lat(scheme: TilingScheme, y: u32, j: usize, n: usize, ny: f64) -> f64 {
     let f = (f64::from(y) + j as f64 / (n - 1) as f64) / ny;
     match scheme {
-        TilingScheme::Geographic => 90.0 - f * 180.0,
+        TilingScheme::Geographic | TilingScheme::GeographicReduced => 90.0 - f * 180.0,
         TilingScheme::WebMercator => (std::f64::consts::PI * (1.0 - 2.0 * f))
             .sinh()
             .atan()

@@ -199,10 +199,11 @@ impl<O: TileOracle> Walk<'_, O> {
             self.draw(key, sse_px, distance_m);
             return;
         }
-        let Some(children) = key.children() else {
+        let children = self.oracle.scheme().children(key);
+        if children.is_empty() {
             self.draw(key, sse_px, distance_m);
             return;
-        };
+        }
         let mut visible: [Option<TileInfo>; 4] = [None; 4];
         let mut all_loaded = true;
         let mut blocked = false;
@@ -237,13 +238,14 @@ impl<O: TileOracle> Walk<'_, O> {
         }
         // Nearest child first: front-to-back order helps early depth rejection.
         let mut order = [0usize, 1, 2, 3];
+        let order = &mut order[..children.len()];
         let dist = |i: usize| {
             visible[i].as_ref().map_or(f64::INFINITY, |ci| {
                 ci.bounds.sphere.centre.distance_squared(self.eye)
             })
         };
         order.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
-        for i in order {
+        for &mut i in order {
             if let Some(ci) = visible[i].as_ref() {
                 self.visit(children[i], ci);
             }
