@@ -122,13 +122,11 @@ impl TileMesh {
         };
         let spacing_m = rect.height() / n * ellipsoid.mean_radius();
         let (adaptive, cut_error_m) = cut(tile, spacing_m, ellipsoid.mean_radius(), options);
-        // A reduced polar tile's neighbour across its north or south edge may be twice as
-        // wide and a level coarser, with up to eight times its error, not four.
         let reduced = GLOBE_SCHEME.columns(tile.key.level(), tile.key.y()) > 1;
-        let error_factor = SKIRT_ERROR_FACTOR * if reduced { 2.0 } else { 1.0 };
         let geometric_error_m = tile.geometric_error_m + cut_error_m;
         // Drawn metres: cracks between neighbours are differences of exaggerated heights.
-        let skirt_depth_m = error_factor * geometric_error_m * exaggeration + 0.02 * spacing_m;
+        let skirt_depth_m =
+            SKIRT_ERROR_FACTOR * geometric_error_m * exaggeration + 0.02 * spacing_m;
 
         let edges = adaptive.edge_vertices();
         let surface = adaptive.vertices.len();
