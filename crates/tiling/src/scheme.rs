@@ -18,16 +18,18 @@
 //! (osgEarth#809, mapbox-gl-js#11508) draws coarser tiles near the poles but keeps their
 //! sliver shape, so imagery there stays streaked; an equal-area projection of engine tiles
 //! would resample every geographic pyramid. The reduced tree keeps geographic rectangles
-//! (every source, skirt and draping rule holds as it was), keys as they were (a reduced
-//! tile is named by its westernmost column) and ancestor fallback (every tile still has one
-//! parent that contains it).
+//! (every source and draping rule holds as it was; only wide polar edges need care in the
+//! meshes, `globus_terrain::mesh`), keys as they were (a reduced tile is named by its
+//! westernmost column) and ancestor fallback (every tile still has one parent that
+//! contains it).
 //!
 //! A tile at level L, row y spans `2^k` columns where `2^k` is the largest power of two with
 //! `2^k cos(phi) <= 1.6`, `phi` the latitude of the row's edge nearer the equator, so its
-//! width there is from 0.8 to 1.6 times its height (tiles below 36.9 degrees do not merge). Halving the row moves that edge at most
-//! half a row polewards, which at most halves its cosine; so a child row spans the same
-//! columns as its parent or half as many, children nest in their parent, and a tile has four
-//! children or, where the poleward row stays whole, three.
+//! width there is from 0.8 to 1.6 times its height (tiles below 36.9 degrees do not merge).
+//! Halving a row moves that edge at most half a row polewards, which at most halves its
+//! cosine; so a child spans half its parent's width or, in the poleward half, possibly the
+//! whole of it: children nest in their parent, and a tile has four children or, where its
+//! poleward half stays whole, three.
 //!
 //! Naming: XYZ (`y` from the north, used by keys), TMS (`y` from the south) and Bing-style
 //! quadkeys. Quadkeys are defined by Bing for Web Mercator; for the geographic scheme Globus
