@@ -600,4 +600,6 @@ fn a_pmtiles_bomb_is_refused_in_one_line_that_says_it_once() {
     fails_with_one_line(&args, &["bomb.pmtiles", "inflates past 67108864 bytes"]);
     let err = String::from_utf8_lossy(&globus(&args).stderr).to_string();
     assert_eq!(err.matches("inflates past").count(), 1, "{err}");
+    // The file is named once too.
+    assert_eq!(err.matches("bomb.pmtiles").count(), 1, "{err}");
 }

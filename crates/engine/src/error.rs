@@ -6,7 +6,7 @@
 #[derive(Debug, thiserror::Error)]
 pub enum EngineError {
     /// A data source named in the options could not be opened.
-    #[error("{what} {url}: {error}")]
+    #[error("{}", source_message(what, url, error))]
     Source {
         /// "terrain" or "imagery".
         what: &'static str,
@@ -70,4 +70,15 @@ pub enum EngineError {
     /// The GPU could not do what was asked (no adapter, a failed readback).
     #[error(transparent)]
     Render(#[from] globus_render::RenderError),
+}
+
+/// "terrain URL: why", or "terrain why" when the reason already names the URL (an
+/// archive's own errors name their file): the location is said once.
+fn source_message(what: &str, url: &str, error: &globus_stream::fetch::OpenError) -> String {
+    let why = error.to_string();
+    if why.contains(url) {
+        format!("{what} {why}")
+    } else {
+        format!("{what} {url}: {why}")
+    }
 }

