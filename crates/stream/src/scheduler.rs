@@ -57,7 +57,8 @@ pub struct SchedulerStats {
     pub loaded: u64,
     /// Tiles the source had no data for.
     pub no_data: u64,
-    /// Tiles that failed for good.
+    /// Tiles that failed for good, as reported (a failure of a load cancelled meanwhile is
+    /// dropped, not counted).
     pub failed: u64,
     /// Transient failures that were scheduled for another attempt.
     pub retries: u64,
@@ -479,7 +480,6 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
                     let failed = q.backoff.get(&key).map_or(0, |b| b.0) + 1;
                     if failed >= shared.retry.max_attempts {
                         q.backoff.remove(&key);
-                        q.stats.failed += 1;
                         Some(Outcome::Failed(e))
                     } else {
                         let retry_after = match &e {
@@ -503,16 +503,21 @@ fn worker<S: TileSource + ?Sized>(shared: &Shared<S>, tx: &Sender<Message<S::Til
                 }
                 Err(e) => {
                     q.backoff.remove(&key);
-                    q.stats.failed += 1;
                     Some(Outcome::Failed(e))
                 }
             };
-            let outcome = if cancel.is_cancelled() && matches!(outcome, Some(Outcome::Failed(_))) {
-                // A failure of a tile nobody wants is not worth reporting.
-                q.stats.dropped += 1;
-                None
-            } else {
-                outcome
+            let outcome = match outcome {
+                // A failure of a tile nobody wants is not worth reporting (nor counting: it
+                // is asked again if it is wanted again, and counted then).
+                Some(Outcome::Failed(_)) if cancel.is_cancelled() => {
+                    q.stats.dropped += 1;
+                    None
+                }
+                Some(Outcome::Failed(e)) => {
+                    q.stats.failed += 1;
+                    Some(Outcome::Failed(e))
+                }
+                other => other,
             };
             if outcome.is_none() {
                 q.in_flight.remove(&key);
