@@ -214,17 +214,22 @@ fn bad_arguments_end_with_one_clear_line() {
     }
 }
 
+/// A camera path file of these keyframes (JSON objects, comma-separated) in a scratch file.
+fn path_file(name: &str, keyframes: &str) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!("globus-{name}-{}.json", std::process::id()));
+    std::fs::write(&path, format!(r#"{{"keyframes": [{keyframes}]}}"#))
+        .expect("a scratch path file");
+    path
+}
+
 /// A keyframe a million years away is refused before a sample per frame is allocated.
 #[test]
 fn bench_refuses_a_path_of_more_frames_than_it_replays() {
-    let path = std::env::temp_dir().join(format!("globus-long-path-{}.json", std::process::id()));
-    std::fs::write(
-        &path,
-        r#"{"keyframes": [
-            {"t": 0, "lon": 7.6, "lat": 46, "alt": 10000, "heading": 0, "pitch": -90},
-            {"t": 1e12, "lon": 7.6, "lat": 46, "alt": 20000, "heading": 0, "pitch": -90}]}"#,
-    )
-    .unwrap();
+    let path = path_file(
+        "long-path",
+        r#"{"t": 0, "lon": 7.6, "lat": 46, "alt": 10000, "heading": 0, "pitch": -90},
+           {"t": 1e12, "lon": 7.6, "lat": 46, "alt": 20000, "heading": 0, "pitch": -90}"#,
+    );
     fails_with_one_line(
         &["bench", "--path", path.to_str().unwrap(), "--size", "64x64"],
         &["frames", "at most 1000000"],
@@ -236,14 +241,11 @@ fn bench_refuses_a_path_of_more_frames_than_it_replays() {
 /// --sse-max and never past it, and the report says so frame by frame.
 #[test]
 fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
-    let path = std::env::temp_dir().join(format!("globus-fps-path-{}.json", std::process::id()));
-    std::fs::write(
-        &path,
-        r#"{"keyframes": [
-            {"t": 0, "lon": 7.6, "lat": 46, "alt": 40000, "heading": 0, "pitch": -30},
-            {"t": 6, "lon": 7.9, "lat": 46.2, "alt": 20000, "heading": 40, "pitch": -20}]}"#,
-    )
-    .unwrap();
+    let path = path_file(
+        "fps-path",
+        r#"{"t": 0, "lon": 7.6, "lat": 46, "alt": 40000, "heading": 0, "pitch": -30},
+           {"t": 6, "lon": 7.9, "lat": 46.2, "alt": 20000, "heading": 40, "pitch": -20}"#,
+    );
     let held = json(&globus(&[
         "bench",
         "--path",
