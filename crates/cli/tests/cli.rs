@@ -264,6 +264,17 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
     );
     assert!(median > 2.5 && max <= 6.0, "{held}");
     assert_eq!(held["target_fps"], 1000.0);
+    // Visits: every drawn tile is visited, and culled ones are counted apart.
+    let per_tile = |key: &str| held[key]["median"].as_f64().unwrap();
+    let (all, visible) = (
+        per_tile("nodes_visited_per_tile"),
+        per_tile("visible_nodes_per_tile"),
+    );
+    assert!(visible >= 1.0 && visible <= all, "{held}");
+    assert!(
+        held["nodes_culled"]["max"].as_f64().unwrap() > 0.0,
+        "{held}"
+    );
     std::fs::remove_file(&path).ok();
 }
 

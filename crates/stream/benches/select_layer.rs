@@ -42,6 +42,7 @@ fn selection(c: &mut Criterion) {
     for (name, alt, pitch) in [
         ("3 radii", 2.0 * 6_378_137.0, -90.0),
         ("150 km down", 150_000.0, -90.0),
+        ("1 km above ground, down", ground + 1_000.0, -90.0),
         ("1 km above ground, horizon", ground + 1_000.0, 0.0),
     ] {
         let view = View::from_geodetic(
@@ -61,14 +62,28 @@ fn selection(c: &mut Criterion) {
         let mut sel = Selection::default();
         select_into(&view, &layer, &options, &mut sel);
         let label = format!(
-            "select {name} ({} tiles, {} nodes)",
+            "select {name} ({} tiles, {} nodes, {} culled by the frustum, {} by the horizon)",
             sel.draw.len(),
-            sel.stats.nodes_visited
+            sel.stats.nodes_visited,
+            sel.stats.culled_frustum,
+            sel.stats.culled_horizon
         );
         c.bench_function(&label, |b| {
             b.iter(|| select_into(black_box(&view), &layer, &options, &mut sel))
         });
-        assert_eq!(layer.scheme(), globus_tiling::TilingScheme::Geographic);
+        let mut trash = vec![0u64; 4 << 20];
+        c.bench_function(&format!("{label} cold"), |b| {
+            b.iter_batched(
+                || {
+                    for (i, t) in trash.iter_mut().enumerate() {
+                        *t = t.wrapping_add(i as u64);
+                    }
+                },
+                |()| select_into(black_box(&view), &layer, &options, &mut sel),
+                criterion::BatchSize::PerIteration,
+            )
+        });
+        assert_eq!(layer.scheme(), globus_tiling::GLOBE_SCHEME);
     }
 }
 

@@ -2,8 +2,9 @@
 //! [`TileOracle`].
 //!
 //! Selection asks about every tile it visits, every frame, so the answers live in one compact
-//! table ([`Node`] records, stored inline in a hash map): one lookup and a few adjacent cache
-//! lines per visit, instead of chasing pointers into the large tile data. Loaded tiles have
+//! table ([`Node`] records stored by family, see [`crate::nodes`]): one lookup and a few
+//! adjacent cache lines for all the children of a tile selection refines, instead of chasing
+//! pointers into the large tile data. Loaded tiles have
 //! exact records; their children get estimated records (bounds from the parent's heights) as
 //! soon as the parent arrives, so they can be culled before they are loaded.
 //!
@@ -29,6 +30,7 @@ use globus_tiling::{
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::colour_jobs::{ColourChannel, Failures, MAX_REMEMBERED_KEYS};
+use crate::nodes::NodeTable;
 use crate::scheduler::Outcome;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
 
@@ -137,7 +139,7 @@ pub struct TerrainLayer {
     /// Separate colour loads, started with the first tile that needs one.
     colours: Option<ColourChannel>,
     workers: usize,
-    nodes: FxHashMap<TileKey, Node>,
+    nodes: NodeTable<Node>,
     /// Tiles the source said it has no data for: never asked again, even after their
     /// records were dropped with an evicted parent.
     no_data: FxHashSet<TileKey>,
@@ -164,7 +166,7 @@ impl TerrainLayer {
             cache: LruCache::new(options.cache_bytes),
             colours: None,
             workers: options.workers,
-            nodes: FxHashMap::default(),
+            nodes: NodeTable::default(),
             no_data: FxHashSet::default(),
             usage: None,
             failures: Failures::default(),
@@ -405,24 +407,22 @@ impl TerrainLayer {
                     error_m: data.lod_error_m(),
                     state: TileState::Loaded,
                 };
-                let children = GLOBE_SCHEME.children(key);
-                if !children.is_empty() {
+                let n = GLOBE_SCHEME.children(key).len();
+                if n > 0 {
                     let child_error = node.error_m * 0.5;
-                    for (i, &child) in children.iter().enumerate() {
-                        let estimate = Node {
-                            bounds: data.child_bounds[i],
-                            error_m: child_error,
-                            state: TileState::Unloaded,
-                        };
-                        self.nodes
-                            .entry(child)
-                            .and_modify(|n| {
-                                if n.state == TileState::Unloaded {
-                                    *n = estimate;
-                                }
-                            })
-                            .or_insert(estimate);
-                    }
+                    let child_bounds = &data.child_bounds[..n];
+                    self.nodes.update_children(key, |i, member| {
+                        // Loaded, failed and empty children keep their records.
+                        if member.is_none_or(|n| n.state == TileState::Unloaded)
+                            && let Some(&bounds) = child_bounds.get(i)
+                        {
+                            *member = Some(Node {
+                                bounds,
+                                error_m: child_error,
+                                state: TileState::Unloaded,
+                            });
+                        }
+                    });
                 }
                 self.nodes.insert(key, node);
                 let cached = Cached { data, colour: None };
@@ -444,7 +444,7 @@ impl TerrainLayer {
         };
         let mut node = self
             .nodes
-            .get(&key)
+            .get(key)
             .copied()
             .unwrap_or_else(|| self.estimate(key));
         node.state = state;
@@ -454,18 +454,12 @@ impl TerrainLayer {
     /// Drops an evicted tile's record, keeping an estimate if its parent is still loaded,
     /// and the estimates of its children (nobody can reach them any more).
     fn forget(&mut self, key: TileKey) {
-        {
-            for &child in GLOBE_SCHEME.children(key).iter() {
-                if self
-                    .nodes
-                    .get(&child)
-                    .is_some_and(|n| n.state != TileState::Loaded)
-                {
-                    // Estimates, failures and "no data" (remembered in `no_data`).
-                    self.nodes.remove(&child);
-                }
+        // Estimates, failures and "no data" (remembered in `no_data`).
+        self.nodes.update_children(key, |_, member| {
+            if member.is_some_and(|n| n.state != TileState::Loaded) {
+                *member = None;
             }
-        }
+        });
         let parent_loaded = GLOBE_SCHEME
             .parent(key)
             .is_some_and(|p| self.cache.contains(p));
@@ -473,7 +467,7 @@ impl TerrainLayer {
             let estimate = self.estimate(key);
             self.nodes.insert(key, estimate);
         } else {
-            self.nodes.remove(&key);
+            self.nodes.remove(key);
         }
     }
 
@@ -537,12 +531,32 @@ impl TileOracle for TerrainLayer {
     }
 
     fn tile(&self, key: TileKey) -> TileInfo {
-        let has_children = key.level() < self.max_level;
-        let node = match self.nodes.get(&key) {
+        let node = match self.nodes.get(key) {
             Some(n) => *n,
             // Only reachable through a tile selection did not descend into; stay correct.
             None => self.estimate(key),
         };
+        self.info(key, &node)
+    }
+
+    fn child_tiles(&self, parent: TileKey, children: &[TileKey]) -> [Option<TileInfo>; 4] {
+        let family = self.nodes.family(Some(parent));
+        let mut out = [None; 4];
+        for (i, (slot, &child)) in out.iter_mut().zip(children).enumerate() {
+            let node = match family.and_then(|f| f.members()[i]) {
+                Some(n) => n,
+                None => self.estimate(child),
+            };
+            *slot = Some(self.info(child, &node));
+        }
+        out
+    }
+}
+
+impl TerrainLayer {
+    /// Selection's view of a record.
+    fn info(&self, key: TileKey, node: &Node) -> TileInfo {
+        let has_children = key.level() < self.max_level;
         let state = match node.state {
             TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
             // A failed tile is asked for again after its cool-down (a server may recover).
@@ -583,7 +597,7 @@ mod tests {
         assert_eq!(layer.tile(child).state, TileState::NoData);
         // The parent is evicted: its children's records go, the answer stays.
         layer.forget(parent);
-        assert!(!layer.nodes.contains_key(&child));
+        assert!(!layer.nodes.contains_key(child));
         assert_eq!(layer.tile(child).state, TileState::NoData);
         assert_eq!(
             layer.tile(TileKey::new(4, 11, 4)).state,
@@ -637,6 +651,7 @@ mod tests {
         };
         let mut peak = 0;
         let mut arrived = 0;
+        let mut asked = Vec::new();
         for _ in 0..100 {
             // Sixteen random tiles at levels 5-8 wanted each frame, nothing drawn.
             let wanted: Vec<TileRequest> = (0..16)
@@ -650,6 +665,7 @@ mod tests {
                     TileRequest { key, priority: 1.0 }
                 })
                 .collect();
+            asked.extend(wanted.iter().map(|r| r.key));
             let stats = layer.update(&[], &[], &wanted);
             arrived += stats.arrived;
             peak = peak.max(stats.cached_bytes);
@@ -664,5 +680,23 @@ mod tests {
             "{arrived} tiles arrived"
         );
         assert!(peak <= budget, "peak {peak} bytes, budget {budget}");
+        // Through all those loads and evictions, the records read by family agree with the
+        // records read one by one, for loaded parents, evicted ones and never-loaded ones.
+        let mut parents = 0;
+        for key in asked {
+            for parent in [Some(key), GLOBE_SCHEME.parent(key)].into_iter().flatten() {
+                if !GLOBE_SCHEME.is_valid(parent) {
+                    continue;
+                }
+                let children = GLOBE_SCHEME.children(parent);
+                let together = layer.child_tiles(parent, &children);
+                for (i, &child) in children.iter().enumerate() {
+                    assert_eq!(together[i], Some(layer.tile(child)), "{child}");
+                }
+                assert!(together[children.len()..].iter().all(Option::is_none));
+                parents += usize::from(layer.get(parent).is_some());
+            }
+        }
+        assert!(parents > 3, "{parents} loaded parents among those compared");
     }
 }

@@ -13,6 +13,7 @@ mod colour_jobs;
 pub mod decode;
 pub mod fetch;
 mod layer;
+mod nodes;
 pub mod open;
 mod procedural;
 pub mod pyramid;

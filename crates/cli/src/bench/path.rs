@@ -23,6 +23,7 @@ struct FrameSample {
     frame_ms: f64,
     tiles_rendered: u32,
     nodes_visited: u32,
+    nodes_culled: u32,
     draw_calls: u32,
     triangles: u64,
     tiles_wanted_not_drawable: u32,
@@ -38,6 +39,7 @@ impl FrameSample {
             frame_ms,
             tiles_rendered: r.draw.tiles,
             nodes_visited: r.selection.nodes_visited,
+            nodes_culled: r.selection.culled_frustum + r.selection.culled_horizon,
             draw_calls: r.draw.draw_calls,
             triangles: r.draw.triangles,
             tiles_wanted_not_drawable: r.wanted,
@@ -136,11 +138,15 @@ pub fn run(
     }
     let column = |f: fn(&FrameSample) -> f64| quantiles(samples.iter().map(f).collect());
     let complete = samples.iter().filter(|s| s.complete()).count();
-    let per_tile: Vec<f64> = samples
-        .iter()
-        .filter(|s| s.tiles_rendered > 0)
-        .map(|s| f64::from(s.nodes_visited) / f64::from(s.tiles_rendered))
-        .collect();
+    let per_tile = |count: fn(&FrameSample) -> u32| {
+        quantiles(
+            samples
+                .iter()
+                .filter(|s| s.tiles_rendered > 0)
+                .map(|s| f64::from(count(s)) / f64::from(s.tiles_rendered))
+                .collect(),
+        )
+    };
     let globe = off.globe();
     let st = globe.layer().scheduler_stats();
     let cs = globe.layer().colour_scheduler_stats();
@@ -164,7 +170,9 @@ pub fn run(
         "select_cpu_us": column(|s| s.select_cpu_us),
         "tiles_wanted_not_drawable": column(|s| f64::from(s.tiles_wanted_not_drawable)),
         "tiles_showing_ancestor_imagery": column(|s| f64::from(s.tiles_showing_ancestor_imagery)),
-        "nodes_visited_per_tile": quantiles(per_tile),
+        "nodes_visited_per_tile": per_tile(|s| s.nodes_visited),
+        "nodes_culled": column(|s| f64::from(s.nodes_culled)),
+        "visible_nodes_per_tile": per_tile(|s| s.nodes_visited - s.nodes_culled),
         "tiles_requested": st.requested,
         "tiles_loaded": st.loaded,
         "requests_cancelled": st.cancelled,

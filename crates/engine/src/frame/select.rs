@@ -3,6 +3,8 @@
 
 use globus_render::Residency;
 use globus_stream::TerrainLayer;
+#[cfg(test)]
+use globus_tiling::GLOBE_SCHEME;
 use globus_tiling::{TileInfo, TileKey, TileOracle, TileState, TilingScheme};
 
 /// The oracle selection walks: the layer's bounds, errors and load states, where a tile
@@ -21,10 +23,27 @@ impl TileOracle for ResidentOracle<'_> {
 
     fn tile(&self, key: TileKey) -> TileInfo {
         let mut info = self.layer.tile(key);
+        self.resident_or_unloaded(key, &mut info);
+        info
+    }
+
+    fn child_tiles(&self, parent: TileKey, children: &[TileKey]) -> [Option<TileInfo>; 4] {
+        let mut out = self.layer.child_tiles(parent, children);
+        for (info, &child) in out.iter_mut().zip(children) {
+            if let Some(info) = info {
+                self.resident_or_unloaded(child, info);
+            }
+        }
+        out
+    }
+}
+
+impl ResidentOracle<'_> {
+    /// A loaded tile counts as loaded only once it is resident.
+    fn resident_or_unloaded(&self, key: TileKey, info: &mut TileInfo) {
         if info.state == TileState::Loaded && !self.residency.contains(key) {
             info.state = TileState::Unloaded;
         }
-        info
     }
 }
 
@@ -72,5 +91,39 @@ mod tests {
         assert_eq!(oracle.tile(root).state, TileState::Loaded);
         // Bounds and errors are the layer's.
         assert_eq!(oracle.tile(root).bounds, layer.tile(root).bounds);
+        // Children read together answer as they do one by one: not resident, not loaded.
+        let children = GLOBE_SCHEME.children(root);
+        let together = oracle.child_tiles(root, &children);
+        for (i, &child) in children.iter().enumerate() {
+            assert_eq!(together[i], Some(oracle.tile(child)));
+            assert_eq!(oracle.tile(child).bounds, layer.tile(child).bounds);
+        }
+        let child = children[0];
+        let request = globus_tiling::TileRequest {
+            key: child,
+            priority: 1.0,
+        };
+        layer.update(&[], &[root], &[request]);
+        while layer.get(child).is_none() {
+            layer.wait_for_tiles(Duration::from_millis(100));
+        }
+        for resident in [false, true] {
+            if resident {
+                residency.place(child, 10, 30, DVec3::ZERO, &mut evicted);
+            }
+            let oracle = ResidentOracle {
+                layer: &layer,
+                residency: &residency,
+            };
+            let together = oracle.child_tiles(root, &children);
+            let expected = if resident {
+                TileState::Loaded
+            } else {
+                TileState::Unloaded
+            };
+            assert_eq!(together[0].map(|t| t.state), Some(expected));
+            assert_eq!(together[0], Some(oracle.tile(child)));
+            assert_eq!(layer.tile(child).state, TileState::Loaded);
+        }
     }
 }

@@ -19,13 +19,14 @@
 //! they partition the globe, so there are no holes. Only the roots can be missing (before
 //! their first load), and they are requested first.
 //!
-//! The traversal visits each tile at most once and asks the [`TileOracle`] once per tile.
+//! The traversal visits each tile at most once and asks the [`TileOracle`] once per tile:
+//! for a refined tile's children, all at once.
 
 mod oracle;
 
 pub use oracle::{TileInfo, TileOracle, TileState};
 
-use globus_geo::{Ellipsoid, EllipsoidalOccluder, Frustum, View};
+use globus_geo::{Ellipsoid, EllipsoidalOccluder, Frustum, Intersection, View};
 
 use crate::{TileBounds, TileKey};
 
@@ -174,7 +175,16 @@ impl<O: TileOracle> Walk<'_, O> {
     fn is_visible(&mut self, bounds: &TileBounds) -> bool {
         let stats = &mut self.out.stats;
         stats.nodes_visited += 1;
-        if self.frustum.intersect_box(&bounds.obb) == globus_geo::Intersection::Outside {
+        // The sphere contains the box: its cheaper test settles most tiles, wholly inside or
+        // wholly outside; only those it straddles need the box's.
+        let outside = match self.frustum.intersect_sphere(&bounds.sphere) {
+            Intersection::Outside => true,
+            Intersection::Inside => false,
+            Intersection::Intersecting => {
+                self.frustum.intersect_box(&bounds.obb) == Intersection::Outside
+            }
+        };
+        if outside {
             stats.culled_frustum += 1;
             return false;
         }
@@ -188,14 +198,25 @@ impl<O: TileOracle> Walk<'_, O> {
     }
 
     /// A visible, loaded tile: draw it or refine it.
-    fn visit(&mut self, key: TileKey, info: &TileInfo) {
+    /// Distance from the eye (metres) and screen-space error (pixels) of a tile, and whether
+    /// it is to be refined.
+    fn error(&self, key: TileKey, info: &TileInfo) -> (f64, f64, bool) {
         let distance_m = info.bounds.obb.distance_to(self.eye);
         let px_per_m = self
             .ortho_px_per_m
             .unwrap_or(self.sse_factor / distance_m.max(1e-6));
         let sse_px = info.geometric_error_m * px_per_m;
         let can_refine = info.has_children && key.level() < self.options.max_level;
-        if sse_px <= self.options.max_sse_px || !can_refine {
+        (
+            distance_m,
+            sse_px,
+            can_refine && sse_px > self.options.max_sse_px,
+        )
+    }
+
+    fn visit(&mut self, key: TileKey, info: &TileInfo) {
+        let (distance_m, sse_px, refine) = self.error(key, info);
+        if !refine {
             self.draw(key, sse_px, distance_m);
             return;
         }
@@ -204,12 +225,15 @@ impl<O: TileOracle> Walk<'_, O> {
             self.draw(key, sse_px, distance_m);
             return;
         }
-        let mut visible: [Option<TileInfo>; 4] = [None; 4];
+        let mut visible = self.oracle.child_tiles(key, &children);
         let mut all_loaded = true;
         let mut blocked = false;
-        for (slot, &child) in visible.iter_mut().zip(children.iter()) {
-            let child_info = self.oracle.tile(child);
+        for slot in visible.iter_mut().take(children.len()) {
+            let Some(child_info) = slot else {
+                continue;
+            };
             if !self.is_visible(&child_info.bounds) {
+                *slot = None;
                 continue;
             }
             match child_info.state {
@@ -217,7 +241,6 @@ impl<O: TileOracle> Walk<'_, O> {
                 TileState::Unloaded => all_loaded = false,
                 TileState::NoData | TileState::Failed => blocked = true,
             }
-            *slot = Some(child_info);
         }
         if blocked {
             self.draw(key, sse_px, distance_m);
