@@ -539,17 +539,19 @@ impl TileOracle for TerrainLayer {
         self.info(key, &node)
     }
 
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey]) -> [Option<TileInfo>; 4] {
+    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
         let family = self.nodes.family(Some(parent));
-        let mut out = [None; 4];
-        for (i, (slot, &child)) in out.iter_mut().zip(children).enumerate() {
+        for (i, slot) in out.iter_mut().enumerate() {
+            let Some(&child) = children.get(i) else {
+                *slot = None;
+                continue;
+            };
             let node = match family.and_then(|f| f.members()[i]) {
                 Some(n) => n,
                 None => self.estimate(child),
             };
             *slot = Some(self.info(child, &node));
         }
-        out
     }
 }
 
@@ -689,7 +691,8 @@ mod tests {
                     continue;
                 }
                 let children = GLOBE_SCHEME.children(parent);
-                let together = layer.child_tiles(parent, &children);
+                let mut together = [None; 4];
+                layer.child_tiles(parent, &children, &mut together);
                 for (i, &child) in children.iter().enumerate() {
                     assert_eq!(together[i], Some(layer.tile(child)), "{child}");
                 }

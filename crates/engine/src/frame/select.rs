@@ -27,14 +27,13 @@ impl TileOracle for ResidentOracle<'_> {
         info
     }
 
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey]) -> [Option<TileInfo>; 4] {
-        let mut out = self.layer.child_tiles(parent, children);
+    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
+        self.layer.child_tiles(parent, children, out);
         for (info, &child) in out.iter_mut().zip(children) {
             if let Some(info) = info {
                 self.resident_or_unloaded(child, info);
             }
         }
-        out
     }
 }
 
@@ -93,7 +92,8 @@ mod tests {
         assert_eq!(oracle.tile(root).bounds, layer.tile(root).bounds);
         // Children read together answer as they do one by one: not resident, not loaded.
         let children = GLOBE_SCHEME.children(root);
-        let together = oracle.child_tiles(root, &children);
+        let mut together = [None; 4];
+        oracle.child_tiles(root, &children, &mut together);
         for (i, &child) in children.iter().enumerate() {
             assert_eq!(together[i], Some(oracle.tile(child)));
             assert_eq!(oracle.tile(child).bounds, layer.tile(child).bounds);
@@ -115,7 +115,8 @@ mod tests {
                 layer: &layer,
                 residency: &residency,
             };
-            let together = oracle.child_tiles(root, &children);
+            let mut together = [None; 4];
+            oracle.child_tiles(root, &children, &mut together);
             let expected = if resident {
                 TileState::Loaded
             } else {

@@ -149,8 +149,10 @@ pub fn select_into(
             TileState::NoData | TileState::Failed => {}
         }
     }
-    // Highest priority first; ties broken by level (ancestors first) and key for determinism.
-    out.requests.sort_by(|a, b| {
+    // Highest priority first; ties broken by level (ancestors first) and key for determinism
+    // (keys are unique, so the order is total and an unstable sort, which does not allocate,
+    // gives the same list).
+    out.requests.sort_unstable_by(|a, b| {
         b.priority
             .total_cmp(&a.priority)
             .then(a.key.level().cmp(&b.key.level()))
@@ -225,7 +227,8 @@ impl<O: TileOracle> Walk<'_, O> {
             self.draw(key, sse_px, distance_m);
             return;
         }
-        let mut visible = self.oracle.child_tiles(key, &children);
+        let mut visible = [None; 4];
+        self.oracle.child_tiles(key, &children, &mut visible);
         let mut all_loaded = true;
         let mut blocked = false;
         for slot in visible.iter_mut().take(children.len()) {
@@ -267,7 +270,7 @@ impl<O: TileOracle> Walk<'_, O> {
                 ci.bounds.sphere.centre.distance_squared(self.eye)
             })
         };
-        order.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)));
+        order.sort_unstable_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)));
         for &mut i in order {
             if let Some(ci) = visible[i].as_ref() {
                 self.visit(children[i], ci);

@@ -38,16 +38,15 @@ pub trait TileOracle {
     /// What is known about `key`.
     fn tile(&self, key: TileKey) -> TileInfo;
 
-    /// What is known about each of `parent`'s children, in order; `children` is
-    /// `self.scheme().children(parent)` and the answer has one entry per child. Selection
+    /// What is known about each of `parent`'s children, in order, into `out` (one entry per
+    /// child, the rest `None`); `children` is `self.scheme().children(parent)`. Selection
     /// asks this whenever it refines a tile, so oracles that keep siblings together should
     /// answer it with one lookup; the default asks [`TileOracle::tile`] for each child.
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey]) -> [Option<TileInfo>; 4] {
+    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
         let _ = parent;
-        let mut out = [None; 4];
+        *out = [None; 4];
         for (slot, &child) in out.iter_mut().zip(children) {
             *slot = Some(self.tile(child));
         }
-        out
     }
 }
