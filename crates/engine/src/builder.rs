@@ -357,17 +357,23 @@ impl GlobeBuilder {
         gpu: &GpuContext,
         colour_format: wgpu::TextureFormat,
     ) -> Result<Globe, EngineError> {
-        self.build_on(
-            &gpu.device,
-            &gpu.queue,
-            gpu.adapter.get_info().backend,
+        let info = gpu.adapter.get_info();
+        self.check()?;
+        let source = self.open_source()?;
+        let software = info.device_type == wgpu::DeviceType::Cpu;
+        Globe::new(
+            self,
+            (&gpu.device, &gpu.queue, info.backend, software),
             colour_format,
+            source,
         )
     }
 
     /// Like [`GlobeBuilder::build`], on a device and queue the application made itself (an
     /// engine that already has its wgpu context). `backend` is its adapter's
-    /// (`adapter.get_info().backend`): OpenGL's depth range needs a larger near plane.
+    /// (`adapter.get_info().backend`): OpenGL's depth range needs a larger near plane. A
+    /// memory budget here assumes a hardware rasteriser; [`GlobeBuilder::build`] also counts
+    /// what a software one (lavapipe) takes at its first draw.
     pub fn build_on(
         &self,
         device: &wgpu::Device,
@@ -377,7 +383,7 @@ impl GlobeBuilder {
     ) -> Result<Globe, EngineError> {
         self.check()?;
         let source = self.open_source()?;
-        Globe::new(self, (device, queue, backend), colour_format, source)
+        Globe::new(self, (device, queue, backend, false), colour_format, source)
     }
 
     /// Refuses options out of their ranges, naming the option.

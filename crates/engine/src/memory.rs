@@ -1,7 +1,8 @@
 //! One memory budget for everything Globus holds (`memory_mb` in the config file,
 //! `--memory-mb`): the process as it stands before any tile (code, GPU driver, targets:
-//! measured when the globe is made), headroom for loads in flight and allocator slack, the
-//! decoded source tiles and refinement bases of the data sources, the GPU tile pools (counted
+//! measured when the globe is made, plus what a software rasteriser's first draw adds),
+//! headroom for loads in flight and allocator slack, the decoded source tiles and
+//! refinement bases of the data sources, the GPU tile pools (counted
 //! in full: on a software rasteriser they are host memory, on a GPU they are video memory an
 //! application should not overrun either) and the cache of loaded tiles, which gets the rest.
 //!
