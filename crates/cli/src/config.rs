@@ -192,12 +192,16 @@ pub fn disk_cache_options(dir: &Path, max_mb: u64) -> DiskCacheOptions {
     }
 }
 
+/// The largest configuration file read. A real one is a few kilobytes; the TOML parser
+/// needs about 50 times a file's size for deeply nested arrays (a 16 MiB file of brackets
+/// took 807 MiB before it was refused), so the cap bounds the parse to tens of megabytes.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
 impl Config {
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text =
-            globus_tiling::files::read_text_capped(path, globus_tiling::files::MAX_TEXT_BYTES)
-                .with_context(|| format!("cannot read {}", path.display()))?;
+        let text = globus_tiling::files::read_text_capped(path, MAX_CONFIG_BYTES)
+            .with_context(|| format!("cannot read {}", path.display()))?;
         let c: Config = toml::from_str(&text).map_err(|e| toml_error(path, &text, &e))?;
         c.check().with_context(|| path.display().to_string())?;
         Ok(c)
@@ -455,6 +459,27 @@ mod tests {
         ] {
             assert!(parse(bad).is_err(), "{bad}");
         }
+    }
+
+    /// A 16 MiB file of nested brackets took 807 MiB to refuse: files past 1 MiB are refused
+    /// unread, and the deepest nesting that fits is refused with the line.
+    #[test]
+    fn deeply_nested_and_oversized_files_are_refused_cheaply() {
+        let dir = std::env::temp_dir().join(format!("globus-config-deep-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let deep = |n: usize| format!("sse = {}{}\n", "[".repeat(n), "]".repeat(n));
+        let big = dir.join("big.toml");
+        std::fs::write(&big, deep(600_000)).unwrap();
+        let e = format!("{:#}", Config::load(&big).expect_err("refused"));
+        assert!(
+            e.contains("big.toml") && e.contains("1048576-byte limit"),
+            "{e}"
+        );
+        let fits = dir.join("fits.toml");
+        std::fs::write(&fits, deep(500_000)).unwrap();
+        let e = format!("{:#}", Config::load(&fits).expect_err("refused"));
+        assert!(e.contains("fits.toml") && e.contains("line 1"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     /// Every config error said only "TOML parse error at line 1, column 1": now the line of
