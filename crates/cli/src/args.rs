@@ -324,8 +324,11 @@ impl ViewArgs {
 /// The vector layer of the config file's `[[vector]]` tables and the `--vector` arguments
 /// (`None` without any): every file read, each bad feature a warning, a file that cannot be
 /// read or is not GeoJSON an error. The config's `[vector_style]` gives every file's
-/// defaults.
-pub fn vector_layer(a: &GlobeArgs) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
+/// defaults. With a memory budget of `budget_bytes`, the files may hold a quarter of it.
+pub fn vector_layer(
+    a: &GlobeArgs,
+    budget_bytes: Option<u64>,
+) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
     let config = a.config.as_deref().map(Config::load).transpose()?;
     let defaults = match &config {
         Some(c) => config::style_map(&c.vector_style, "vector_style")?,
@@ -336,6 +339,9 @@ pub fn vector_layer(a: &GlobeArgs) -> anyhow::Result<Option<globus_engine::Vecto
         return Ok(None);
     }
     let mut layer = globus_engine::VectorLayer::new();
+    if let Some(bytes) = budget_bytes {
+        layer.set_max_positions(globus_engine::VectorLayer::positions_for_bytes(bytes / 4));
+    }
     if let (Some(c), Some(path)) = (&config, &a.config) {
         let base = path.parent().unwrap_or(Path::new("."));
         for (i, v) in c.vector.iter().enumerate() {

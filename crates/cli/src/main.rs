@@ -203,6 +203,7 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
     )?;
     let exit_after = a.exit_after()?;
     let globe = args::globe_builder(&a.globe)?;
+    let vectors = args::vector_layer(&a.globe, globe.memory_budget_bytes())?;
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,
@@ -211,7 +212,7 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         width,
         height,
         exit_after,
-        vectors: args::vector_layer(&a.globe)?,
+        vectors,
         traffic: None,
     })
 }

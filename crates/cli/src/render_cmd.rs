@@ -32,7 +32,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         args::check_writable(s)?;
     }
-    let mut vectors = args::vector_layer(&a.globe)?;
+    let mut vectors = args::vector_layer(&a.globe, builder.memory_budget_bytes())?;
     let mut traffic = match &a.traffic.traffic {
         Some(path) => {
             let mut scene = crate::traffic_cmd::scene(path, a.traffic.time.as_deref(), None)?;

@@ -1243,3 +1243,94 @@ fn named_points_get_decluttered_labels_beside_them_and_none_behind_the_planet() 
     // Two more draw calls than without labels: leaders (none drawn) and glyphs.
     assert!(stats.draw_calls <= 4, "{stats:?}");
 }
+
+/// A deterministic random walk of `n` vertices from `from`, steps of `step` degrees.
+fn random_walk(n: usize, from: [f64; 2], step: f64) -> Vec<[f64; 3]> {
+    let mut s = 99u64;
+    let [mut lon, mut lat] = from;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let a = (s >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU;
+            lon += step * a.cos();
+            lat += step * a.sin();
+            [lon, lat, 0.0]
+        })
+        .collect()
+}
+
+#[test]
+fn a_million_vertex_line_draws_in_bounded_instances_where_the_cpu_puts_it() {
+    // Two lines of half a million vertices each: a wavy "coast" sampled every 2 m (all of it
+    // needed only a metre from the ground), and a random walk that fills its area (no
+    // tolerance a tile can show makes it sparse: the per-tile budget does). Drawn whole,
+    // they were a million instances in every tile that covered them.
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let coast_lat = |lon: f64| {
+        46.3 + 0.02 * (std::f64::consts::TAU * lon * 7.0).sin()
+            + 0.004 * (std::f64::consts::TAU * lon * 61.0).sin()
+    };
+    let n = 500_000;
+    let coast: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            let lon = 7.0 + i as f64 / (n - 1) as f64;
+            [lon, coast_lat(lon), 0.0]
+        })
+        .collect();
+    let style = |colour: &str| {
+        feature(
+            0,
+            &format!(
+                r##"{{"type": "Feature", "properties": {{"stroke": "{colour}", "stroke-width": 3}},
+                    "geometry": {{"type": "LineString", "coordinates": [[0, 0], [1, 1]]}}}}"##
+            ),
+        )
+    };
+    let mut coast_feature = style("#ff00ff");
+    coast_feature.lines = vec![coast.clone()];
+    let mut walk_feature = style("#00ffff");
+    walk_feature.lines = vec![random_walk(n, [7.5, 46.7], 0.0001)];
+    let mut layer = VectorLayer::new();
+    layer.add_batch([coast_feature, walk_feature]);
+    let cam = common::camera(7.5, 46.45, 150_000.0, 0.0, -90.0, true);
+    let mut view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
+    view = cam.view(off.globe(), 60.0, w, h);
+    let (img, bg) = with_and_without(&mut off, &view, &mut layer, "million_vertices");
+    let stats = layer.stats();
+    let tiles = off.update(&view).draw.tiles;
+    eprintln!("million vertices: {stats:?}, {tiles} tiles drawn");
+    assert!(
+        stats.line_instances < 60_000,
+        "{} instances for {tiles} tiles",
+        stats.line_instances
+    );
+    // The coast lies where the CPU projects it, along its whole length in view.
+    let globe = off.globe();
+    let camera = *globe.camera().expect("a frame camera");
+    let (mut expected, mut hit) = (0usize, 0usize);
+    for p in coast.iter().step_by(250) {
+        let (lon, lat) = (p[0].to_radians(), p[1].to_radians());
+        let at = globe.world_position(Cartographic::new(lon, lat, globe.ground_height_m(lon, lat)));
+        let Some(px) = camera.project(at) else {
+            continue;
+        };
+        let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
+        if x < 2 || y < 2 || x >= i64::from(w) - 2 || y >= i64::from(h) - 2 {
+            continue;
+        }
+        let c = coverage(&img, &bg, x, y, MAGENTA);
+        if c.is_nan() {
+            continue;
+        }
+        expected += 1;
+        hit += usize::from(c > 0.5);
+    }
+    assert!(expected > 500, "only {expected} coast pixels in view");
+    let share = hit as f64 / expected as f64;
+    assert!(share >= 0.98, "{:.1} % of the coast drawn", share * 100.0);
+}

@@ -9,6 +9,8 @@
 //!   densification, triangulation.
 //! * [`drape`]: lines and fills cut along the triangles of a drawn terrain tile, so they lie
 //!   on it exactly.
+//! * [`simplify`]: lines ranked once for Douglas-Peucker at every tolerance, read per tile
+//!   at the tolerance its size asks for.
 //!
 //! Everything here is deterministic f64 code tested without a GPU; the engine's vector
 //! overlay (`globus_engine::vector`) turns it into GPU buffers.
@@ -18,10 +20,12 @@ pub mod feature;
 pub mod load;
 pub mod read;
 pub mod shape;
+pub mod simplify;
 pub mod style;
 
 pub use drape::{DrapeSurface, DrapedSegment};
 pub use feature::{Feature, from_geojson};
 pub use load::{FeatureWarning, Loaded, load_file};
-pub use read::{MAX_FEATURE_BYTES, ReadError, ReadSummary, read, read_file};
+pub use read::{Flow, MAX_FEATURE_BYTES, ReadError, ReadSummary, read, read_file};
+pub use simplify::{LineIndex, Selection};
 pub use style::{Clamp, LineCap, LineJoin, PathKind, Rgba, Style, StyleRules, label_text};

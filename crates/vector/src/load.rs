@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::feature::{Feature, from_geojson};
-use crate::read::{ReadError, read_file};
+use crate::read::{Flow, ReadError, read_file};
 use crate::style::StyleRules;
 
 /// Warnings logged and kept per file; the rest are counted.
@@ -37,18 +37,32 @@ pub struct Loaded {
     pub stopped: Option<String>,
 }
 
-/// Reads and styles every feature of `path`.
-pub fn load_file(path: &Path, rules: &StyleRules) -> Result<Loaded, ReadError> {
+/// Reads and styles the features of `path`, as many as hold at most `max_positions`
+/// positions together: the read stops, with a warning and [`Loaded::stopped`] saying so, at
+/// the first feature that would take more (the features before it are kept).
+pub fn load_file(
+    path: &Path,
+    rules: &StyleRules,
+    max_positions: usize,
+) -> Result<Loaded, ReadError> {
     let mut loaded = Loaded {
         path: path.to_owned(),
         ..Default::default()
     };
     let mut messages = Vec::new();
+    let mut positions = 0usize;
     let summary = read_file(path, &mut |index, raw| {
         messages.clear();
         match raw {
             Ok(f) => {
                 if let Some(f) = from_geojson(index, f, rules, &mut messages) {
+                    positions += f.position_count();
+                    if positions > max_positions {
+                        return Flow::Break(format!(
+                            "feature {index} would take the layer past {max_positions} \
+                             positions, the most it may hold"
+                        ));
+                    }
                     loaded.features.push(f);
                 }
             }
@@ -61,6 +75,7 @@ pub fn load_file(path: &Path, rules: &StyleRules) -> Result<Loaded, ReadError> {
                 loaded.warnings.push(FeatureWarning { index, message });
             }
         }
+        Flow::Continue(())
     })?;
     loaded.read = summary.features;
     if loaded.warning_count > LOGGED_WARNINGS {
@@ -72,9 +87,9 @@ pub fn load_file(path: &Path, rules: &StyleRules) -> Result<Loaded, ReadError> {
     }
     if let Some(why) = &summary.stopped {
         tracing::warn!(
-            "{}: reading stopped {why}; the {} features before are drawn",
+            "{}: reading stopped ({why}); the {} drawable features before it are kept",
             path.display(),
-            summary.features
+            loaded.features.len()
         );
     }
     loaded.stopped = summary.stopped;
@@ -110,11 +125,13 @@ mod tests {
         );
         let r = globus_test_support::fuzz::run("geojson", |b| {
             let mut any = false;
-            let _ = crate::read::read(Path::new("fuzz.geojson"), b, &mut |i, raw| {
-                let Ok(f) = raw else { return };
+            let _ = crate::read::read(Path::new("fuzz.geojson"), b, &mut |i, raw| -> Flow {
+                let Ok(f) = raw else {
+                    return Flow::Continue(());
+                };
                 let mut w = Vec::new();
                 let Some(f) = crate::from_geojson(i, f, &StyleRules::default(), &mut w) else {
-                    return;
+                    return Flow::Continue(());
                 };
                 any = true;
                 for l in &f.lines {
@@ -128,6 +145,7 @@ mod tests {
                         surface.drape_triangle(t, 0.0, &mut Vec::new());
                     }
                 }
+                Flow::Continue(())
             });
             any
         });
@@ -139,7 +157,12 @@ mod tests {
 
     #[test]
     fn every_country_loads_without_a_warning() {
-        let l = load_file(&data("countries-110m.geojson"), &StyleRules::default()).unwrap();
+        let l = load_file(
+            &data("countries-110m.geojson"),
+            &StyleRules::default(),
+            usize::MAX,
+        )
+        .unwrap();
         assert_eq!(l.read, 177);
         assert_eq!(l.features.len(), 177);
         // Natural Earth's 1:110m USA (Alaska, at 141 W) and Sudan rings cross themselves by
@@ -167,7 +190,7 @@ mod tests {
     #[test]
     fn every_fir_extrudes_to_its_own_limits() {
         let rules = StyleRules::from_fragment("extrude=true").unwrap();
-        let l = load_file(&data("eurocontrol-firs.geojson"), &rules).unwrap();
+        let l = load_file(&data("eurocontrol-firs.geojson"), &rules, usize::MAX).unwrap();
         assert_eq!(l.read, 58);
         assert_eq!(l.features.len(), 58, "{:?}", l.warnings);
         for f in &l.features {
@@ -185,7 +208,12 @@ mod tests {
 
     #[test]
     fn the_toulouse_airspace_reads_in_flight_levels() {
-        let l = load_file(&data("airspace-LFBOTMA.json"), &StyleRules::default()).unwrap();
+        let l = load_file(
+            &data("airspace-LFBOTMA.json"),
+            &StyleRules::default(),
+            usize::MAX,
+        )
+        .unwrap();
         assert!(l.features.len() >= 2, "{}", l.features.len());
         assert_eq!(l.warnings, []);
         let (lo, hi) = l.features[0].style.extrude.unwrap();
@@ -213,7 +241,7 @@ mod tests {
         }
         text.push_str("]}");
         std::fs::write(&path, text).unwrap();
-        let l = load_file(&path, &StyleRules::default()).unwrap();
+        let l = load_file(&path, &StyleRules::default(), usize::MAX).unwrap();
         assert_eq!(l.read, 100);
         assert_eq!(l.features.len(), 90);
         assert_eq!(l.warning_count, 10);
@@ -221,11 +249,55 @@ mod tests {
             l.warnings.iter().map(|w| w.index).collect::<Vec<_>>(),
             (0..10).map(|k| k * 10 + 3).collect::<Vec<_>>()
         );
-        let e = load_file(&dir.join("missing.geojson"), &StyleRules::default()).unwrap_err();
+        let e = load_file(
+            &dir.join("missing.geojson"),
+            &StyleRules::default(),
+            usize::MAX,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("missing.geojson"), "{e}");
         std::fs::write(&path, "name,lat,lon\nx,1,2\n").unwrap();
-        let e = load_file(&path, &StyleRules::default()).unwrap_err();
+        let e = load_file(&path, &StyleRules::default(), usize::MAX).unwrap_err();
         assert!(e.to_string().contains("not GeoJSON"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_file_stops_at_the_feature_that_would_pass_the_position_budget() {
+        let dir = std::env::temp_dir().join(format!("globus-vector-cap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let line = |k: usize| {
+            let coords: Vec<String> = (0..10).map(|i| format!("[{}, {}]", i, k % 80)).collect();
+            format!(
+                r#"{{"type": "Feature", "properties": {{}}, "geometry": {{"type": "LineString", "coordinates": [{}]}}}}"#,
+                coords.join(",")
+            )
+        };
+        let features: Vec<String> = (0..100).map(line).collect();
+        let collection = dir.join("lines.geojson");
+        std::fs::write(
+            &collection,
+            format!(
+                r#"{{"type": "FeatureCollection", "features": [{}]}}"#,
+                features.join(",")
+            ),
+        )
+        .unwrap();
+        let sequence = dir.join("lines.geojsonl");
+        let records: String = features.iter().map(|f| format!("\x1e{f}\n")).collect();
+        std::fs::write(&sequence, records).unwrap();
+        for path in [&collection, &sequence] {
+            let l = load_file(path, &StyleRules::default(), 255).unwrap();
+            // 25 lines of 10 positions fit; the 26th would make 260.
+            assert_eq!(l.features.len(), 25, "{}", path.display());
+            assert_eq!(l.read, 26, "{}: read no further", path.display());
+            let why = l.stopped.expect("stopped");
+            assert!(
+                why.contains("feature 25") && why.contains("255 positions"),
+                "{why}"
+            );
+            let all = load_file(path, &StyleRules::default(), 1000).unwrap();
+            assert_eq!((all.features.len(), all.stopped), (100, None));
+        }
     }
 }

@@ -27,12 +27,13 @@ pub const MAX_FEATURE_BYTES: u64 = 16 << 20;
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     /// Opening or reading failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// What went wrong.
-        source: std::io::Error,
+        /// What went wrong (quoted by the message and not also its `source()`, so a chain
+        /// printed whole says it once).
+        cause: std::io::Error,
     },
     /// The file is not GeoJSON (nor a text sequence or the airspace layout).
     #[error("{path}: not GeoJSON: {reason}")]
@@ -90,14 +91,19 @@ impl From<Box<geojson::Error>> for FeatureError {
 /// One feature as read, or why it is not one.
 pub type RawFeature = Result<geojson::Feature, FeatureError>;
 
-/// Reads `path`, handing each feature to `sink` with its index in the file.
+/// What a sink says after each feature: read on, or stop the read (for this reason, which
+/// becomes [`ReadSummary::stopped`]).
+pub type Flow = std::ops::ControlFlow<String>;
+
+/// Reads `path`, handing each feature to `sink` with its index in the file, until the sink
+/// says stop.
 pub fn read_file(
     path: &Path,
-    sink: &mut dyn FnMut(usize, RawFeature),
+    sink: &mut dyn FnMut(usize, RawFeature) -> Flow,
 ) -> Result<ReadSummary, ReadError> {
-    let io = |source| ReadError::Io {
+    let io = |cause| ReadError::Io {
         path: path.to_owned(),
-        source,
+        cause,
     };
     let file = globus_tiling::files::open_regular(path).map_err(io)?;
     read(path, file, sink)
@@ -107,7 +113,7 @@ pub fn read_file(
 pub fn read(
     path: &Path,
     reader: impl Read,
-    sink: &mut dyn FnMut(usize, RawFeature),
+    sink: &mut dyn FnMut(usize, RawFeature) -> Flow,
 ) -> Result<ReadSummary, ReadError> {
     let counter = Rc::new(Cell::new(0u64));
     let mut buffered = BufReader::with_capacity(
@@ -118,9 +124,9 @@ pub fn read(
         },
     );
     let first = loop {
-        let buf = buffered.fill_buf().map_err(|source| ReadError::Io {
+        let buf = buffered.fill_buf().map_err(|cause| ReadError::Io {
             path: path.to_owned(),
-            source,
+            cause,
         })?;
         let Some(&b) = buf.first() else {
             return Err(not_geojson(path, "the file is empty"));
@@ -172,7 +178,7 @@ impl<R: Read> Read for Counted<R> {
 fn read_sequence(
     path: &Path,
     mut reader: impl BufRead,
-    sink: &mut dyn FnMut(usize, RawFeature),
+    sink: &mut dyn FnMut(usize, RawFeature) -> Flow,
 ) -> ReadSummary {
     let mut summary = ReadSummary::default();
     let mut record = Vec::new();
@@ -205,8 +211,12 @@ fn read_sequence(
         let feature = serde_json::from_slice::<Value>(&record)
             .map_err(FeatureError::from)
             .and_then(feature_from_value);
-        sink(summary.features, feature);
+        let flow = sink(summary.features, feature);
         summary.features += 1;
+        if let Flow::Break(why) = flow {
+            summary.stopped = Some(format!("after record {}: {why}", summary.features - 1));
+            break;
+        }
     }
     summary
 }
@@ -229,7 +239,7 @@ fn read_object(
     path: &Path,
     reader: impl Read,
     counter: Rc<Cell<u64>>,
-    sink: &mut dyn FnMut(usize, RawFeature),
+    sink: &mut dyn FnMut(usize, RawFeature) -> Flow,
 ) -> Result<ReadSummary, ReadError> {
     let mut de = serde_json::Deserializer::from_reader(reader);
     let mut features = 0usize;
@@ -251,7 +261,7 @@ fn read_object(
         Err(e) if e.is_io() => {
             return Err(ReadError::Io {
                 path: path.to_owned(),
-                source: std::io::Error::other(e.to_string()),
+                cause: std::io::Error::other(e.to_string()),
             });
         }
         Err(e) => return Err(not_geojson(path, &format!("{e}"))),
@@ -275,10 +285,10 @@ fn read_object(
         "" => Err(not_geojson(path, "an object without a \"type\"")),
         "Feature" | "Point" | "MultiPoint" | "LineString" | "MultiLineString" | "Polygon"
         | "MultiPolygon" | "GeometryCollection" => {
-            sink(0, feature_from_value(Value::Object(rest.map)));
+            let stopped = sink(0, feature_from_value(Value::Object(rest.map))).break_value();
             Ok(ReadSummary {
                 features: 1,
-                stopped: None,
+                stopped,
             })
         }
         other => Err(not_geojson(path, &format!("a {other:?} object"))),
@@ -290,7 +300,7 @@ fn read_object(
 fn airspace(
     path: &Path,
     mut map: Map<String, Value>,
-    sink: &mut dyn FnMut(usize, RawFeature),
+    sink: &mut dyn FnMut(usize, RawFeature) -> Flow,
 ) -> Result<ReadSummary, ReadError> {
     let Some(Value::Array(shapes)) = map.remove("shapes") else {
         return Err(not_geojson(path, "\"shapes\" is not a list"));
@@ -323,15 +333,19 @@ fn airspace(
                 ..Default::default()
             })
         })();
-        sink(i, feature);
+        let flow = sink(i, feature);
         summary.features += 1;
+        if let Flow::Break(why) = flow {
+            summary.stopped = Some(format!("after shape {i}: {why}"));
+            break;
+        }
     }
     Ok(summary)
 }
 
 /// The top-level object: `features` streamed to the sink, every other key kept.
 struct TopLevel<'a> {
-    sink: &'a mut dyn FnMut(usize, RawFeature),
+    sink: &'a mut dyn FnMut(usize, RawFeature) -> Flow,
     counter: Rc<Cell<u64>>,
     features: &'a mut usize,
 }
@@ -376,7 +390,7 @@ impl<'de> Visitor<'de> for TopLevel<'_> {
 }
 
 struct Features<'a> {
-    sink: &'a mut dyn FnMut(usize, RawFeature),
+    sink: &'a mut dyn FnMut(usize, RawFeature) -> Flow,
     counter: Rc<Cell<u64>>,
     features: &'a mut usize,
 }
@@ -400,8 +414,11 @@ impl<'de> Visitor<'de> for Features<'_> {
         self.counter.set(0);
         while let Some(v) = seq.next_element::<Value>()? {
             self.counter.set(0);
-            (self.sink)(*self.features, feature_from_value(v));
+            let flow = (self.sink)(*self.features, feature_from_value(v));
             *self.features += 1;
+            if let Flow::Break(why) = flow {
+                return Err(serde::de::Error::custom(why));
+            }
         }
         Ok(())
     }
@@ -416,6 +433,7 @@ mod tests {
         let summary = read(Path::new("test.geojson"), text, &mut |i, f| {
             assert_eq!(i, out.len());
             out.push(f);
+            Flow::Continue(())
         })?;
         Ok((out, summary))
     }

@@ -294,6 +294,9 @@ impl Curve<'_> {
         if depth >= MAX_SPLIT_DEPTH {
             return;
         }
+        if self.surely_within_tolerance(a, b) {
+            return;
+        }
         let Some(mid) = self.midpoint(a, b) else {
             return;
         };
@@ -316,6 +319,27 @@ impl Curve<'_> {
         self.split(a, mid, depth + 1, out);
         out.push(mid);
         self.split(mid, b, depth + 1, out);
+    }
+
+    /// Whether a piece is so short that its drawing cannot stray from its path by the
+    /// tolerance, whatever the path and the drawing (densely sampled lines, a million
+    /// vertices a few metres apart, skip the geodesic problems). Drawings and paths both
+    /// leave the piece's ends in directions that differ by at most the angle a parallel
+    /// turns over its length (`L tan(lat) / R`) or the body's curvature (`L / R`), so they
+    /// part by at most `L^2 (1 + tan(lat)) / (8 R)` with `R` the smallest radius of
+    /// curvature, counted twice over here.
+    fn surely_within_tolerance(&self, a: Position, b: Position) -> bool {
+        let lat = a[1].abs().max(b[1].abs());
+        if lat > 89.0 {
+            return false;
+        }
+        let r = self.ellipsoid.radii();
+        let (min_radius, max_radius) = (r.z * r.z / r.x, r.x * r.x / r.z);
+        let h = a[2].abs().max(b[2].abs());
+        // A bound on the piece's length: its latitude and longitude spans together.
+        let len = (max_radius + h) * ((a[1] - b[1]).abs() + (a[0] - b[0]).abs()).to_radians();
+        let apart = len * len * (1.0 + lat.to_radians().tan()) / (8.0 * min_radius);
+        2.0 * apart <= self.tolerance_m
     }
 
     fn ecef(&self, p: Position) -> DVec3 {
@@ -706,5 +730,49 @@ mod tests {
                 .all(|w| w[1][0] > w[0][0] && w[1][0] - w[0][0] < 2.0),
             "{d:?}"
         );
+    }
+
+    #[test]
+    fn pieces_skipped_as_short_are_within_the_tolerance() {
+        // Pieces just short enough to be skipped, at every latitude up to 89 degrees, in
+        // every direction, for each path and drawing: the midpoint test they skip would
+        // have passed, with room to spare.
+        let e = Ellipsoid::WGS84;
+        let radii = e.radii();
+        let geodesic = Geodesic::new(radii.x, 1.0 - radii.z / radii.x);
+        let mut skipped = 0;
+        let mut worst = 0.0;
+        for path in [PathKind::Geodesic, PathKind::Rhumb] {
+            for straight in [Straight::LonLat, Straight::Chord] {
+                let curve = Curve {
+                    ellipsoid: &e,
+                    geodesic: &geodesic,
+                    path,
+                    straight,
+                    tolerance_m: 1.0,
+                };
+                for lat10 in 0..=889 {
+                    let lat = f64::from(lat10) / 10.0;
+                    for k in 0..8 {
+                        let azi = f64::from(k) * 0.785 + 0.1;
+                        // Lengths from 100 m to 40 km.
+                        for step in [1e-3, 1e-2, 0.05, 0.1, 0.2, 0.4] {
+                            let a = [10.0, lat, 0.0];
+                            let b = [10.0 + step * azi.sin(), lat + step * azi.cos() * 0.5, 0.0];
+                            if b[1].abs() > 89.0 || !curve.surely_within_tolerance(a, b) {
+                                continue;
+                            }
+                            skipped += 1;
+                            let mid = curve.midpoint(a, b).expect("a midpoint");
+                            let off = (curve.drawn_midpoint(a, b) - curve.ecef(mid)).length();
+                            worst = f64::max(worst, off);
+                            assert!(off <= 0.6, "{path:?} {straight:?} {a:?}-{b:?}: {off} m");
+                        }
+                    }
+                }
+            }
+        }
+        eprintln!("{skipped} skipped, worst {worst} m");
+        assert!(skipped > 20_000, "{skipped}");
     }
 }

@@ -62,7 +62,7 @@ pub fn run(
     let text =
         globus_tiling::files::read_text_capped(path_file, globus_tiling::files::MAX_TEXT_BYTES)
             .with_context(|| format!("cannot read {}", path_file.display()))?;
-    let mut vectors = args::vector_layer(&a.globe)?;
+    let mut vectors = args::vector_layer(&a.globe, builder.memory_budget_bytes())?;
     let mut vector_samples: Vec<(f64, bool, u32)> = Vec::new();
     let mut off = Headless::new(builder, width, height)?;
     let fov = a.globe.fov_deg;

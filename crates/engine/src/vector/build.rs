@@ -5,7 +5,7 @@
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_terrain::TileMesh;
 use globus_vector::shape::{self, Position, Straight};
-use globus_vector::{Clamp, DrapeSurface, Feature, Rgba};
+use globus_vector::{Clamp, DrapeSurface, DrapedSegment, Feature, LineIndex, Rgba, Selection};
 
 use super::gpu::{FillVertex, LineInstance, LineLook, push_run};
 
@@ -27,6 +27,15 @@ const CAP_STEP_DEG: f64 = 0.5;
 /// large enough that a continent is a few thousand.
 const DRAPED_CELL_DEG: f64 = 1.0;
 
+/// A line is drawn in a tile simplified to this fraction of the tile's height (a drawn tile
+/// is at most a few hundred pixels tall once its colour texels meet the error bound, so
+/// this is about a tenth of a pixel)...
+const LINE_TOLERANCE_OF_TILE: f64 = 1.0 / 4096.0;
+/// ...and to no more vertices near the tile than this (the tolerance is raised for the
+/// lines that would have more: a million-vertex line over a tile draws in it as well as a
+/// tile's few hundred pixels can show it, in a bounded number of instances).
+const MAX_LINE_VERTICES_PER_TILE: usize = 4096;
+
 /// Width of the outline drawn round point symbols, pixels.
 const MARKER_OUTLINE_PX: f32 = 1.5;
 
@@ -47,6 +56,8 @@ pub(crate) struct DrapedLine {
     pub look: LineLook,
     /// A ring: it has no ends to cap.
     pub closed: bool,
+    /// Its vertices ranked for simplification, and their blocks' bounds.
+    pub index: LineIndex,
 }
 
 impl DrapedLine {
@@ -63,6 +74,7 @@ impl DrapedLine {
         Self {
             bbox: Bbox::of(pts.iter().copied()),
             along: cumulative_length(&world),
+            index: LineIndex::new(&pts),
             pts,
             look,
             closed,
@@ -733,6 +745,15 @@ pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
     DrapeSurface::new(rect_deg, uv, positions, triangles).with_skirts(skirts)
 }
 
+/// Buffers reused while a tile drapes its lines.
+#[derive(Default)]
+struct LineScratch {
+    pts: Vec<[f64; 2]>,
+    segs: Vec<DrapedSegment>,
+    run: Vec<DVec3>,
+    metres: Vec<f64>,
+}
+
 /// Instances one tile draws for the draped geometry of `features` (id, draped part), at
 /// anchor 0 (the caller sets the tile's anchor).
 #[derive(Clone, Debug, Default)]
@@ -745,34 +766,23 @@ pub(crate) struct TileDrape {
 impl TileDrape {
     pub(crate) fn add(&mut self, surface: &DrapeSurface, id: u32, d: &Draped) {
         let rect = surface.rect_deg();
-        let mut segs = Vec::new();
-        let (mut run, mut metres) = (Vec::new(), Vec::new());
+        let tolerance = (rect[3] - rect[1]) * LINE_TOLERANCE_OF_TILE;
+        let (mut selection, mut scratch) = (Selection::default(), LineScratch::default());
         for l in &d.lines {
             if !l.bbox.overlaps(rect) {
                 continue;
             }
-            let last = (l.pts.len() - 1) as f64;
-            let at = |f: f64| {
-                let i = (f.floor().max(0.0) as usize).min(l.along.len().saturating_sub(2));
-                let t = f - i as f64;
-                l.along[i] + (l.along[(i + 1).min(l.along.len() - 1)] - l.along[i]) * t
-            };
             for shift in surface.shifts(l.bbox.lon[0], l.bbox.lon[1]) {
-                segs.clear();
-                surface.drape_line(&l.pts, shift, &mut segs);
-                // Runs of pieces that meet end to end.
-                for piece in segs.chunk_by(|x, y| x.along[1] == y.along[0]) {
-                    run.clear();
-                    metres.clear();
-                    run.push(piece[0].a);
-                    run.extend(piece.iter().map(|s| s.b));
-                    metres.push(at(piece[0].along[0]));
-                    metres.extend(piece.iter().map(|s| at(s.along[1])));
-                    let ends = (
-                        !l.closed && piece[0].along[0] == 0.0,
-                        !l.closed && piece[piece.len() - 1].along[1] == last,
-                    );
-                    push_run(&mut self.lines, &run, &metres, id, &l.look, ends);
+                let [w, s, e, n] = rect;
+                l.index.select(
+                    [w - shift, s, e - shift, n],
+                    tolerance,
+                    MAX_LINE_VERTICES_PER_TILE,
+                    &mut selection,
+                );
+                for run in &selection.runs {
+                    let kept = &selection.vertices[run.clone()];
+                    self.add_run(surface, id, l, kept, shift, &mut scratch);
                 }
             }
         }
@@ -819,6 +829,55 @@ impl TileDrape {
         }
     }
 
+    /// Drapes one run of a line's kept vertices (indices into `l.pts`).
+    fn add_run(
+        &mut self,
+        surface: &DrapeSurface,
+        id: u32,
+        l: &DrapedLine,
+        kept: &[u32],
+        shift: f64,
+        scratch: &mut LineScratch,
+    ) {
+        let LineScratch {
+            pts,
+            segs,
+            run,
+            metres,
+        } = scratch;
+        pts.clear();
+        pts.extend(kept.iter().map(|&i| l.pts[i as usize]));
+        segs.clear();
+        surface.drape_line(pts, shift, segs);
+        // Metres along the whole line at a fractional index into `kept`.
+        let at = |f: f64| {
+            let i = (f.floor().max(0.0) as usize).min(kept.len().saturating_sub(2));
+            let t = f - i as f64;
+            let (a, b) = (kept[i] as usize, kept[(i + 1).min(kept.len() - 1)] as usize);
+            l.along[a] + (l.along[b] - l.along[a]) * t
+        };
+        let last_vertex = (l.pts.len() - 1) as u32;
+        let (starts, ends) = (
+            !l.closed && kept[0] == 0,
+            !l.closed && kept[kept.len() - 1] == last_vertex,
+        );
+        let last = (kept.len() - 1) as f64;
+        // Runs of pieces that meet end to end.
+        for piece in segs.chunk_by(|x: &DrapedSegment, y| x.along[1] == y.along[0]) {
+            run.clear();
+            metres.clear();
+            run.push(piece[0].a);
+            run.extend(piece.iter().map(|s| s.b));
+            metres.push(at(piece[0].along[0]));
+            metres.extend(piece.iter().map(|s| at(s.along[1])));
+            let caps = (
+                starts && piece[0].along[0] == 0.0,
+                ends && piece[piece.len() - 1].along[1] == last,
+            );
+            push_run(&mut self.lines, run, metres, id, &l.look, caps);
+        }
+    }
+
     /// Drops the pieces of the features with these pick ids.
     pub(crate) fn retain_not(&mut self, picks: &[u32]) {
         self.lines.retain(|l| !picks.contains(&l.id));
@@ -828,6 +887,12 @@ impl TileDrape {
 
     pub(crate) fn is_empty(&self) -> bool {
         self.lines.is_empty() && self.fills.is_empty() && self.points.is_empty()
+    }
+
+    /// Bytes of its instances.
+    pub(crate) fn bytes(&self) -> usize {
+        (self.lines.len() + self.points.len()) * std::mem::size_of::<LineInstance>()
+            + self.fills.len() * std::mem::size_of::<FillVertex>()
     }
 }
 

@@ -46,8 +46,19 @@ pub use gpu::SHADER;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct FeatureId(pub u32);
 
-/// Draped pieces of tiles kept beyond those drawn.
+/// Bytes a position of a feature takes while held and drawn, to plan how many a memory
+/// budget holds. Measured: a 950,000-vertex line from a 13.5 MiB file raised the peak of
+/// `globus render` by 147 MiB (the parse of its text, the feature, its densified, ranked
+/// line and the tiles' pieces), about 160 bytes a position.
+pub const BYTES_PER_POSITION: u64 = 160;
+
+/// Positions a layer reads from files by default (about 1.3 GiB held).
+pub const DEFAULT_MAX_POSITIONS: usize = 8 << 20;
+
+/// Draped pieces of tiles kept beyond those drawn: at most this many tiles...
 const KEPT_TILES: usize = 512;
+/// ...and this many bytes of instances.
+const KEPT_BYTES: usize = 64 << 20;
 
 /// What the layer holds and what its last frame did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -105,6 +116,9 @@ pub struct VectorLayer {
     /// The labels are to be laid out again (features added, changed or removed).
     labels_stale: bool,
     stats: VectorStats,
+    /// Positions of the features held, and the most its files may bring.
+    positions: usize,
+    max_positions: usize,
 }
 
 impl Default for VectorLayer {
@@ -139,17 +153,35 @@ impl VectorLayer {
             labels: PointLabels::default(),
             labels_stale: false,
             stats: VectorStats::default(),
+            positions: 0,
+            max_positions: DEFAULT_MAX_POSITIONS,
         }
     }
 
+    /// The most positions the features read from files may hold together (default
+    /// [`DEFAULT_MAX_POSITIONS`]; [`BYTES_PER_POSITION`] each): a file that would bring
+    /// more is read up to the feature that would pass it, with a warning.
+    pub fn set_max_positions(&mut self, max: usize) -> &mut Self {
+        self.max_positions = max;
+        self
+    }
+
+    /// The positions a share of a memory budget holds (`bytes` / [`BYTES_PER_POSITION`]).
+    pub fn positions_for_bytes(bytes: u64) -> usize {
+        usize::try_from(bytes / BYTES_PER_POSITION).unwrap_or(usize::MAX)
+    }
+
     /// Reads a GeoJSON file (or sequence, or airspace) styled by `rules` and adds its
-    /// features; bad features are warned about (see [`Loaded::warnings`]) and left out.
+    /// features; bad features are warned about (see [`Loaded::warnings`]) and left out, and
+    /// the read stops ([`Loaded::stopped`]) where the layer would hold more positions than
+    /// [`Self::set_max_positions`] allows.
     pub fn add_file(
         &mut self,
         path: &Path,
         rules: &StyleRules,
     ) -> Result<(Loaded, Vec<FeatureId>), ReadError> {
-        let mut loaded = globus_vector::load_file(path, rules)?;
+        let room = self.max_positions.saturating_sub(self.positions);
+        let mut loaded = globus_vector::load_file(path, rules, room)?;
         let ids = self.add_batch(std::mem::take(&mut loaded.features));
         Ok((loaded, ids))
     }
@@ -163,6 +195,7 @@ impl VectorLayer {
     pub fn add(&mut self, feature: Feature) -> FeatureId {
         let id = self.next_id;
         self.next_id += 1;
+        self.positions += feature.position_count();
         self.entries.insert(
             id,
             Entry {
@@ -186,6 +219,7 @@ impl VectorLayer {
             self.released
                 .extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id.0, i)));
         }
+        self.positions = self.positions - e.feature.position_count() + feature.position_count();
         e.feature = feature;
         self.pending.push(id.0);
         self.labels_stale = true;
@@ -197,6 +231,7 @@ impl VectorLayer {
         let Some(e) = self.entries.remove(&id.0) else {
             return false;
         };
+        self.positions -= e.feature.position_count();
         self.labels_stale = true;
         if let Some(b) = e.built {
             self.changed.extend(b.bbox.map(|bb| (id.0, bb)));
@@ -381,6 +416,30 @@ impl VectorLayer {
             let now = self.frame;
             self.tiles
                 .retain(|_, t| t.last_used >= cut || t.last_used == now);
+        }
+        let now = self.frame;
+        let kept: usize = self
+            .tiles
+            .values()
+            .filter(|t| t.last_used != now)
+            .map(|t| t.drape.bytes())
+            .sum();
+        if kept > KEPT_BYTES {
+            let mut old: Vec<(u64, TileKey, usize)> = self
+                .tiles
+                .iter()
+                .filter(|(_, t)| t.last_used != now)
+                .map(|(&k, t)| (t.last_used, k, t.drape.bytes()))
+                .collect();
+            old.sort_unstable_by_key(|&(used, key, _)| (used, key));
+            let mut over = kept - KEPT_BYTES;
+            for (_, key, bytes) in old {
+                if over == 0 {
+                    break;
+                }
+                self.tiles.remove(&key);
+                over = over.saturating_sub(bytes);
+            }
         }
         draped
     }
