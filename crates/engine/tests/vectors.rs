@@ -1334,3 +1334,78 @@ fn a_million_vertex_line_draws_in_bounded_instances_where_the_cpu_puts_it() {
     let share = hit as f64 / expected as f64;
     assert!(share >= 0.98, "{:.1} % of the coast drawn", share * 100.0);
 }
+
+#[test]
+fn a_polygon_of_200000_vertices_fills_what_a_cpu_point_in_polygon_fills_in_bounded_vertices() {
+    // A wavy disc of 200,000 vertices: simplified and cut per tile, it must still cover
+    // exactly what the CPU finds inside its own ring.
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let n = 200_000;
+    let ring: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            let r = 0.3 + 0.03 * (a * 23.0).sin() + 0.002 * (a * 401.0).sin();
+            [7.5 + r * a.cos() * 1.45, 46.4 + r * a.sin(), 0.0]
+        })
+        .collect();
+    let mut polygon = feature(
+        0,
+        r##"{"type": "Feature", "properties": {"fill": "#ff0000", "fill-opacity": 1, "stroke-width": 0},
+            "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}}"##,
+    );
+    polygon.polygons = vec![vec![ring.clone()]];
+    let mut layer = VectorLayer::new();
+    layer.add(polygon);
+    let cam = common::camera(7.5, 46.4, 100_000.0, 0.0, -90.0, true);
+    let mut view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
+    view = cam.view(off.globe(), 60.0, w, h);
+    let (img, bg) = with_and_without(&mut off, &view, &mut layer, "big_polygon");
+    let stats = layer.stats();
+    eprintln!("big polygon: {stats:?}");
+    assert!(
+        stats.fill_vertices < 300_000,
+        "{} fill vertices",
+        stats.fill_vertices
+    );
+    let globe = off.globe();
+    let camera = *globe.camera().expect("a frame camera");
+    let flat: Vec<[f64; 2]> = ring.iter().map(|p| [p[0], p[1]]).collect();
+    let inside = |lon: f64, lat: f64| inside_any(&[vec![flat.clone()]], lon, lat);
+    let (mut checked, mut wrong) = (0usize, 0usize);
+    for j in 0..60 {
+        for i in 0..60 {
+            let lon = 6.8 + 1.4 * f64::from(i) / 59.0;
+            let lat = 45.95 + 0.9 * f64::from(j) / 59.0;
+            let (lon_r, lat_r) = (lon.to_radians(), lat.to_radians());
+            let at = globe.world_position(Cartographic::new(
+                lon_r,
+                lat_r,
+                globe.ground_height_m(lon_r, lat_r),
+            ));
+            let Some(px) = camera.project(at) else {
+                continue;
+            };
+            let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
+            // Not within 2 px of the border (a pixel is about 0.006 degrees here).
+            let near = flat
+                .iter()
+                .step_by(10)
+                .any(|p| ((p[0] - lon) * 0.69).hypot(p[1] - lat) < 0.013);
+            let c = coverage(&img, &bg, x, y, [255.0, 0.0, 0.0]);
+            if near || c.is_nan() {
+                continue;
+            }
+            checked += 1;
+            let want = inside(lon, lat);
+            wrong += usize::from(want != (c > 0.5));
+        }
+    }
+    assert!(checked > 1000, "only {checked} samples");
+    assert!(
+        wrong * 1000 <= checked,
+        "{wrong} of {checked} samples differ from the CPU's point-in-polygon"
+    );
+}

@@ -460,13 +460,17 @@ pub fn triangulate(rings: &[Vec<Position>]) -> (Vec<[f64; 2]>, Vec<u32>) {
 /// cell edge are zero-area and earcut drops them), so the work grows with the ring length
 /// times the bands plus the cells, not their product.
 pub fn tessellate(rings: &[Vec<Position>], step_deg: f64) -> Vec<[[f64; 2]; 3]> {
+    tessellate_flat(&flatten_rings(rings), step_deg)
+}
+
+/// A polygon's rings in longitude/latitude, holes moved by whole turns next to their
+/// exterior.
+pub fn flatten_rings(rings: &[Vec<Position>]) -> Vec<Vec<[f64; 2]>> {
     let Some(exterior) = rings.first() else {
         return Vec::new();
     };
-    let step = step_deg.max(1e-3);
     let c0 = exterior.iter().map(|p| p[0]).sum::<f64>() / exterior.len() as f64;
-    // Rings as 2D, holes moved next to their exterior by whole turns.
-    let flat: Vec<Vec<[f64; 2]>> = rings
+    rings
         .iter()
         .enumerate()
         .map(|(k, r)| {
@@ -478,7 +482,35 @@ pub fn tessellate(rings: &[Vec<Position>], step_deg: f64) -> Vec<[[f64; 2]; 3]> 
             };
             r.iter().map(|p| [p[0] - shift, p[1]]).collect()
         })
-        .collect();
+        .collect()
+}
+
+/// The part of a polygon (flattened rings, exterior first) inside `rect` (west, south,
+/// east, north): each ring clipped (Sutherland-Hodgman), rings left with fewer than three
+/// vertices dropped; nothing if the exterior is.
+pub fn clip_rings(flat: &[Vec<[f64; 2]>], rect: [f64; 4]) -> Vec<Vec<[f64; 2]>> {
+    let [w, s, e, n] = rect;
+    let mut out = Vec::with_capacity(flat.len());
+    for (k, r) in flat.iter().enumerate() {
+        let c = clip_ring(&clip_ring(r, 0, w, true), 0, e, false);
+        let c = clip_ring(&clip_ring(&c, 1, s, true), 1, n, false);
+        if c.len() < 3 {
+            if k == 0 {
+                return Vec::new();
+            }
+            continue;
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// [`tessellate`] of rings already flattened ([`flatten_rings`]).
+pub fn tessellate_flat(flat: &[Vec<[f64; 2]>], step_deg: f64) -> Vec<[[f64; 2]; 3]> {
+    if flat.is_empty() {
+        return Vec::new();
+    }
+    let step = step_deg.max(1e-3);
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in &flat[0] {
         for d in 0..2 {

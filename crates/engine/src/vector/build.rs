@@ -96,13 +96,22 @@ fn cumulative_length(pts: &[DVec3]) -> Vec<f64> {
     out
 }
 
-/// A fill to drape: its tessellated triangles, bounds and colour.
+/// A fill to drape: its tessellated triangles (or, for a polygon of more than
+/// [`BIG_FILL_VERTICES`], its ranked rings, simplified, cut and tessellated per tile), bounds
+/// and colour.
 #[derive(Clone, Debug)]
 pub(crate) struct DrapedFill {
     pub triangles: Vec<[[f64; 2]; 3]>,
+    /// Closed rings (exterior first, holes beside it) and their rankings.
+    pub rings: Vec<(Vec<[f64; 2]>, LineIndex)>,
     pub bbox: Bbox,
     pub colour: Rgba,
 }
+
+/// Polygons with more vertices than this are simplified and cut per tile like lines (at
+/// most [`MAX_FILL_VERTICES_PER_TILE`] in a tile); smaller ones are tessellated once.
+const BIG_FILL_VERTICES: usize = 4096;
+const MAX_FILL_VERTICES_PER_TILE: usize = 16_384;
 
 /// A point symbol on the ground.
 #[derive(Clone, Debug)]
@@ -291,11 +300,29 @@ pub(crate) fn build(
             continue;
         }
         if style.fill.0[3] > 0 {
-            if ground {
+            if ground && rings.iter().map(Vec::len).sum::<usize>() > BIG_FILL_VERTICES {
+                let flat = shape::flatten_rings(&rings);
+                let b = Bbox::of(flat.iter().flatten().copied());
+                let ranked = flat
+                    .into_iter()
+                    .map(|mut r| {
+                        r.push(r[0]);
+                        let index = LineIndex::new(&r);
+                        (r, index)
+                    })
+                    .collect();
+                out.draped.fills.push(DrapedFill {
+                    triangles: Vec::new(),
+                    rings: ranked,
+                    bbox: b,
+                    colour: style.fill,
+                });
+            } else if ground {
                 let tris = shape::tessellate(&rings, DRAPED_CELL_DEG);
                 let b = Bbox::of(tris.iter().flatten().copied());
                 out.draped.fills.push(DrapedFill {
                     triangles: tris,
+                    rings: Vec::new(),
                     bbox: b,
                     colour: style.fill,
                 });
@@ -745,6 +772,34 @@ pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
     DrapeSurface::new(rect_deg, uv, positions, triangles).with_skirts(skirts)
 }
 
+/// A big fill's triangles over a tile (`rect`, at a whole-turn `shift` of the fill): its
+/// rings simplified as lines are, cut to the tile (a hair beyond it) and tessellated.
+fn cut_fill(f: &DrapedFill, rect: [f64; 4], shift: f64) -> Vec<[[f64; 2]; 3]> {
+    let [w, s, e, n] = rect;
+    let (mx, my) = ((e - w) * 0.01, (n - s) * 0.01);
+    let clip = [w - shift - mx, s - my, e - shift + mx, n + my];
+    let mut tolerance = (n - s) * LINE_TOLERANCE_OF_TILE;
+    loop {
+        let kept: Vec<Vec<[f64; 2]>> = f
+            .rings
+            .iter()
+            .map(|(r, index)| {
+                // Without the closing vertex (a ring's last is its first).
+                (0..r.len() - 1)
+                    .filter(|&i| f64::from(index.rank(i)) > tolerance)
+                    .map(|i| r[i])
+                    .collect()
+            })
+            .collect();
+        let cut = shape::clip_rings(&kept, clip);
+        let count: usize = cut.iter().map(Vec::len).sum();
+        if count <= MAX_FILL_VERTICES_PER_TILE || tolerance > 360.0 {
+            return shape::tessellate_flat(&cut, DRAPED_CELL_DEG);
+        }
+        tolerance *= 2.0;
+    }
+}
+
 /// Buffers reused while a tile drapes its lines.
 #[derive(Default)]
 struct LineScratch {
@@ -793,7 +848,14 @@ impl TileDrape {
             }
             let colour = f.colour;
             for shift in surface.shifts(f.bbox.lon[0], f.bbox.lon[1]) {
-                for t in &f.triangles {
+                let cut;
+                let triangles = if f.rings.is_empty() {
+                    &f.triangles
+                } else {
+                    cut = cut_fill(f, rect, shift);
+                    &cut
+                };
+                for t in triangles {
                     let tb = Bbox::of(t.iter().map(|p| [p[0] + shift, p[1]]));
                     if !tb.overlaps(rect) {
                         continue;
