@@ -324,10 +324,12 @@ impl ViewArgs {
 /// The vector layer of the config file's `[[vector]]` tables and the `--vector` arguments
 /// (`None` without any): every file read, each bad feature a warning, a file that cannot be
 /// read or is not GeoJSON an error. The config's `[vector_style]` gives every file's
-/// defaults. With a memory budget of `budget_bytes`, the files may hold a quarter of it.
+/// defaults. Under the builder's memory budget, the layer may take a quarter of it in
+/// positions read (counted in the globe's footprint when it is made) and a quarter in GPU
+/// buffers (reserved in the builder's plan).
 pub fn vector_layer(
     a: &GlobeArgs,
-    budget_bytes: Option<u64>,
+    builder: &mut GlobeBuilder,
 ) -> anyhow::Result<Option<globus_engine::VectorLayer>> {
     let config = a.config.as_deref().map(Config::load).transpose()?;
     let defaults = match &config {
@@ -339,8 +341,10 @@ pub fn vector_layer(
         return Ok(None);
     }
     let mut layer = globus_engine::VectorLayer::new();
-    if let Some(bytes) = budget_bytes {
+    if let Some(bytes) = builder.memory_budget_bytes() {
         layer.set_max_positions(globus_engine::VectorLayer::positions_for_bytes(bytes / 4));
+        layer.set_gpu_budget(bytes / 4);
+        builder.reserve_memory(bytes / 4);
     }
     if let (Some(c), Some(path)) = (&config, &a.config) {
         let base = path.parent().unwrap_or(Path::new("."));

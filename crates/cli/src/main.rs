@@ -202,8 +202,8 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         a.above_ground,
     )?;
     let exit_after = a.exit_after()?;
-    let globe = args::globe_builder(&a.globe)?;
-    let vectors = args::vector_layer(&a.globe, globe.memory_budget_bytes())?;
+    let mut globe = args::globe_builder(&a.globe)?;
+    let vectors = args::vector_layer(&a.globe, &mut globe)?;
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,

@@ -14,7 +14,7 @@ use crate::args::{self, RenderArgs};
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
     let camera = args::parse_camera(&a.camera, a.above_ground)?;
-    let builder = args::globe_builder(&a.globe)?;
+    let mut builder = args::globe_builder(&a.globe)?;
     if !(a.timeout_s > 0.0 && a.timeout_s <= 86_400.0) {
         anyhow::bail!(
             "--timeout-s {} must be a number of seconds above 0 and at most a day (86400)",
@@ -32,7 +32,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         args::check_writable(s)?;
     }
-    let mut vectors = args::vector_layer(&a.globe, builder.memory_budget_bytes())?;
+    let mut vectors = args::vector_layer(&a.globe, &mut builder)?;
     let mut traffic = match &a.traffic.traffic {
         Some(path) => {
             let mut scene = crate::traffic_cmd::scene(path, a.traffic.time.as_deref(), None)?;
@@ -130,6 +130,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 json!({
                     "features": s.features,
                     "line_instances": s.line_instances,
+                    "pieces_left_out": s.left_out,
                     "fill_vertices": s.fill_vertices,
                     "labels": s.labels,
                     "labels_drawn": s.labels_drawn,

@@ -211,8 +211,8 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
     let v = &a.view;
     let exit_after = v.exit_after()?;
     let (width, height) = args::parse_size(&v.size)?;
-    let globe = args::globe_builder(&v.globe)?;
-    let vectors = args::vector_layer(&v.globe, globe.memory_budget_bytes())?;
+    let mut globe = args::globe_builder(&v.globe)?;
+    let vectors = args::vector_layer(&v.globe, &mut globe)?;
     let mut scene = scene(record, a.start.as_deref(), None)?;
     apply_models(&mut scene.layer, &a.models)?;
     let camera = match &v.camera {

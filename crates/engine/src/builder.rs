@@ -59,6 +59,7 @@ pub struct GlobeBuilder {
     uploads_per_frame: u32,
     cache_bytes: usize,
     memory_bytes: Option<u64>,
+    reserved_bytes: u64,
     workers: usize,
     mesh: MeshOptions,
     refine_below: Option<u8>,
@@ -84,6 +85,7 @@ impl Default for GlobeBuilder {
             uploads_per_frame: 24,
             cache_bytes: TerrainLayerOptions::default().cache_bytes,
             memory_bytes: None,
+            reserved_bytes: 0,
             workers: TerrainLayerOptions::default().workers,
             mesh: MeshOptions::default(),
             refine_below: None,
@@ -179,6 +181,14 @@ impl GlobeBuilder {
     /// and [`GlobeBuilder::gpu_tiles`]. `None` removes it.
     pub fn memory_budget(&mut self, bytes: Option<u64>) -> &mut Self {
         self.memory_bytes = bytes;
+        self
+    }
+
+    /// Bytes of the memory budget the application's overlays may take beyond what they hold
+    /// when the globe is made (e.g. [`crate::VectorLayer::set_gpu_budget`]): the plan
+    /// counts them with the process's own footprint, so the tiles get the rest.
+    pub fn reserve_memory(&mut self, bytes: u64) -> &mut Self {
+        self.reserved_bytes = bytes;
         self
     }
 
@@ -358,14 +368,13 @@ impl GlobeBuilder {
         colour_format: wgpu::TextureFormat,
     ) -> Result<Globe, EngineError> {
         let info = gpu.adapter.get_info();
-        self.check()?;
-        let source = self.open_source()?;
         let software = info.device_type == wgpu::DeviceType::Cpu;
-        Globe::new(
-            self,
-            (&gpu.device, &gpu.queue, info.backend, software),
+        self.build_with(
+            &gpu.device,
+            &gpu.queue,
+            info.backend,
+            software,
             colour_format,
-            source,
         )
     }
 
@@ -381,9 +390,27 @@ impl GlobeBuilder {
         backend: wgpu::Backend,
         colour_format: wgpu::TextureFormat,
     ) -> Result<Globe, EngineError> {
+        self.build_with(device, queue, backend, false, colour_format)
+    }
+
+    /// Both builds: checks, opens the sources and makes the globe; `software` says whether
+    /// the device rasterises on the CPU (its first draw is then counted in the budget).
+    fn build_with(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        backend: wgpu::Backend,
+        software: bool,
+        colour_format: wgpu::TextureFormat,
+    ) -> Result<Globe, EngineError> {
         self.check()?;
         let source = self.open_source()?;
-        Globe::new(self, (device, queue, backend, false), colour_format, source)
+        Globe::new(
+            self,
+            (device, queue, backend, software),
+            colour_format,
+            source,
+        )
     }
 
     /// Refuses options out of their ranges, naming the option.
@@ -598,6 +625,7 @@ impl GlobeBuilder {
             uploads_per_frame: self.uploads_per_frame,
             cache_bytes: self.cache_bytes,
             memory_bytes: self.memory_bytes,
+            reserved_bytes: self.reserved_bytes,
             layer_workers: self.layer_workers(),
             source_caches: self.uses_real_data() || self.refine_below.is_some(),
             request_lookahead_frames: self.request_lookahead_frames,
@@ -638,6 +666,7 @@ pub(crate) struct Settings {
     pub uploads_per_frame: u32,
     pub cache_bytes: usize,
     pub memory_bytes: Option<u64>,
+    pub reserved_bytes: u64,
     pub layer_workers: usize,
     pub source_caches: bool,
     pub request_lookahead_frames: f64,

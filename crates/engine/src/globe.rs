@@ -34,6 +34,9 @@ use crate::frame::plan::{FramePlan, Motion};
 use crate::frame::select::ResidentOracle;
 use crate::frame::upload::make_resident;
 use crate::memory::{MemoryPlan, resident_bytes};
+use crate::overlay::{FrameContext, Overlay, OverlayPass};
+use crate::query::{self, TerrainHeight};
+use crate::{EngineError, GlobeBuilder};
 
 /// Bytes per pixel of a frame's targets: colour, its read-back copy, depth and the id buffer.
 const FRAME_BYTES_PER_PIXEL: u64 = 16;
@@ -41,9 +44,6 @@ const FRAME_BYTES_PER_PIXEL: u64 = 16;
 /// measured before it: compiled shaders and binned geometry. Measured on the README's Alps
 /// example: about 125 MiB fixed, and more with the triangles drawn.
 const SOFTWARE_RASTER_BYTES: u64 = 128 << 20;
-use crate::overlay::{FrameContext, Overlay, OverlayPass};
-use crate::query::{self, TerrainHeight};
-use crate::{EngineError, GlobeBuilder};
 
 /// What one frame did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -175,8 +175,11 @@ impl Globe {
         let memory = match settings.memory_bytes {
             Some(total) => Some(MemoryPlan::new(
                 total,
-                resident_bytes()
-                    .map(|r| r + frame_bytes + if software { SOFTWARE_RASTER_BYTES } else { 0 }),
+                resident_bytes().map(|r| {
+                    r + frame_bytes
+                        + settings.reserved_bytes
+                        + if software { SOFTWARE_RASTER_BYTES } else { 0 }
+                }),
                 // The terrain layer's loaders and as many for colour.
                 2 * workers,
                 settings.source_caches,

@@ -1,6 +1,7 @@
 //! One memory budget for everything Globus holds (`memory_mb` in the config file,
-//! `--memory-mb`): the process as it stands before any tile (code, GPU driver, targets:
-//! measured when the globe is made, plus what a software rasteriser's first draw adds),
+//! `--memory-mb`): the process as it stands before any tile (code, GPU driver, targets,
+//! vector features already read: measured when the globe is made, plus what a software
+//! rasteriser's first draw adds and what overlays reserved for their GPU buffers),
 //! headroom for loads in flight and allocator slack, the decoded source tiles and
 //! refinement bases of the data sources, the GPU tile pools (counted
 //! in full: on a software rasteriser they are host memory, on a GPU they are video memory an
@@ -65,7 +66,8 @@ impl SourceBudgets {
 pub struct MemoryPlan {
     /// The whole budget, bytes.
     pub total: u64,
-    /// The process before any tile.
+    /// The process before any tile (with what a software rasteriser's first draw adds and
+    /// what the application reserved for its overlays).
     pub baseline: u64,
     /// Loads in flight and allocator slack.
     pub headroom: u64,

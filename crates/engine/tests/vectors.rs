@@ -1409,3 +1409,51 @@ fn a_polygon_of_200000_vertices_fills_what_a_cpu_point_in_polygon_fills_in_bound
         "{wrong} of {checked} samples differ from the CPU's point-in-polygon"
     );
 }
+
+#[test]
+fn a_gpu_budget_leaves_pieces_out_instead_of_growing_and_a_file_stops_at_its_positions() {
+    // The countries filled over Europe take a few MiB of fill vertices; under a 1 MiB
+    // budget some tiles' pieces are left out (counted), the buffers stay within it, and
+    // the frame is drawn without an error. With room, nothing is left out.
+    let (w, h) = (320u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let cam = common::camera(10.0, 48.0, 3_000_000.0, 0.0, -90.0, false);
+    let view = cam.view(off.globe(), 60.0, w, h);
+    let countries = globus_test_support::shared_data("countries-110m.geojson");
+    let rules = StyleRules::from_fragment("fill=%2300ff00&fill-opacity=1").expect("rules");
+    let mut drawn = Vec::new();
+    for budget in [1u64 << 20, 256 << 20] {
+        let mut layer = VectorLayer::new();
+        layer.set_gpu_budget(budget);
+        layer.add_file(&countries, &rules).expect("countries");
+        off.render_complete(&view, TIMEOUT, &mut [&mut layer])
+            .expect("render");
+        let s = layer.stats();
+        eprintln!("budget {budget}: {s:?}");
+        let buffers = u64::from(s.fill_vertices) * 32 + u64::from(s.line_instances) * 64;
+        assert!(buffers <= budget, "{buffers} bytes drawn under {budget}");
+        drawn.push((s.left_out, s.fill_vertices));
+    }
+    assert!(drawn[0].0 > 0, "nothing left out under 1 MiB: {drawn:?}");
+    assert_eq!(drawn[1].0, 0, "{drawn:?}");
+    assert!(drawn[1].1 > drawn[0].1, "{drawn:?}");
+    // Positions: a layer that may hold 10,000 reads the countries up to the one that would
+    // pass it, and says so.
+    let mut layer = VectorLayer::new();
+    layer.set_max_positions(10_000);
+    let (loaded, ids) = layer.add_file(&countries, &rules).expect("countries");
+    assert!(!ids.is_empty() && ids.len() < 177, "{} features", ids.len());
+    assert!(
+        loaded
+            .stopped
+            .as_deref()
+            .is_some_and(|why| why.contains("10000 positions")),
+        "{:?}",
+        loaded.stopped
+    );
+    let held: usize = ids
+        .iter()
+        .map(|&id| layer.feature(id).expect("held").position_count())
+        .sum();
+    assert!(held <= 10_000, "{held}");
+}

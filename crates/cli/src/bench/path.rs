@@ -62,7 +62,9 @@ pub fn run(
     let text =
         globus_tiling::files::read_text_capped(path_file, globus_tiling::files::MAX_TEXT_BYTES)
             .with_context(|| format!("cannot read {}", path_file.display()))?;
-    let mut vectors = args::vector_layer(&a.globe, builder.memory_budget_bytes())?;
+    let mut builder = builder.clone();
+    let mut vectors = args::vector_layer(&a.globe, &mut builder)?;
+    let builder = &builder;
     let mut vector_samples: Vec<(f64, bool, u32)> = Vec::new();
     let mut off = Headless::new(builder, width, height)?;
     let fov = a.globe.fov_deg;
@@ -275,6 +277,7 @@ fn vector_report(
         "gpu_bytes": idle.gpu_bytes,
         "line_instances": idle.line_instances,
         "fill_vertices": idle.fill_vertices,
+        "pieces_left_out": idle.left_out,
         "updated_features": updated,
         "update_calls_us": update_calls_us,
         "prepare_us_after_update": after.prepare_s * 1e6,

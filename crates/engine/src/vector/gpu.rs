@@ -9,7 +9,10 @@
 //! uploaded once; a frame whose entries changed rewrites only the two indirect argument
 //! lists (one record per drawn entry) and uploads the new entries; every frame writes the
 //! anchors' offsets from the eye. Everything is drawn with two `multi_draw_indirect` calls.
-//! Buffers grow by doubling, copied on the GPU, so ranges stay valid.
+//! Buffers grow by doubling, copied on the GPU, so ranges stay valid, up to the device's
+//! limits (a storage buffer no larger than one binding may see) and the layer's GPU budget:
+//! an entry that does not fit is refused, and the layer makes room by dropping entries not
+//! drawn this frame, or leaves it out.
 
 use std::mem::size_of;
 use std::ops::Range;
@@ -296,7 +299,21 @@ pub(crate) struct Gpu {
     icon_count: u32,
     pub line_count: u32,
     pub fill_vertices: u32,
+    /// Most line instances and fill vertices the buffers may hold (powers of two).
+    line_limit: u32,
+    fill_limit: u32,
 }
+
+/// The largest power of two at most `x` (0 for 0), as a `u32`.
+fn pow2_at_most(x: u64) -> u32 {
+    let x = x.min(u64::from(u32::MAX));
+    if x == 0 {
+        0
+    } else {
+        1 << (63 - x.leading_zeros())
+    }
+}
+
 /// The shader.
 pub const SHADER: &str = concat!(
     include_str!("../overlay_common.wgsl"),
@@ -447,7 +464,25 @@ impl Gpu {
             bind_group: None,
             line_count: 0,
             fill_vertices: 0,
+            line_limit: u32::MAX,
+            fill_limit: u32::MAX,
         }
+        .with_budget(device, u64::MAX)
+    }
+
+    /// Limits the line and fill buffers to half of `bytes` each (and to what the device
+    /// allows); buffers already larger keep their size until entries leave.
+    pub(crate) fn with_budget(mut self, device: &wgpu::Device, bytes: u64) -> Self {
+        let limits = device.limits();
+        let storage = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let line_bytes = size_of::<LineInstance>() as u64;
+        let fill_bytes = size_of::<FillVertex>() as u64;
+        self.line_limit = pow2_at_most(storage.min(bytes / 2) / line_bytes).max(FIRST_LINES);
+        self.fill_limit =
+            pow2_at_most(limits.max_buffer_size.min(bytes / 2) / fill_bytes).max(FIRST_FILLS);
+        self
     }
 
     /// Replaces the icon array by `icons` (RGBA8, [`ICON_SIZE`] squared each), if their
@@ -465,7 +500,8 @@ impl Gpu {
         self.entries.contains_key(&key)
     }
 
-    /// Puts an entry on the GPU (its pieces' anchor fields are set to its slot).
+    /// Puts an entry on the GPU (its pieces' anchor fields are set to its slot); false,
+    /// with nothing changed, if the buffers cannot make room for it within their limits.
     pub(crate) fn insert(
         &mut self,
         frame: &FrameContext<'_>,
@@ -473,9 +509,18 @@ impl Gpu {
         origin: DVec3,
         lines: &[LineInstance],
         fills: &[FillVertex],
-    ) {
+    ) -> bool {
         self.remove(key);
         let (device, queue) = (frame.device(), frame.queue());
+        let Some(line_range) = allocate(&mut self.line_ranges, lines.len() as u32, self.line_limit)
+        else {
+            return false;
+        };
+        let Some(fill_range) = allocate(&mut self.fill_ranges, fills.len() as u32, self.fill_limit)
+        else {
+            self.line_ranges.free(line_range);
+            return false;
+        };
         let slot = self
             .free_slots
             .pop()
@@ -485,8 +530,6 @@ impl Gpu {
         } else {
             self.slot_origins[slot as usize] = origin;
         }
-        let line_range = allocate(&mut self.line_ranges, lines.len() as u32);
-        let fill_range = allocate(&mut self.fill_ranges, fills.len() as u32);
         let line_bytes = size_of::<LineInstance>() as u64;
         let fill_bytes = size_of::<FillVertex>() as u64;
         self.lines.reserve(
@@ -532,6 +575,15 @@ impl Gpu {
                 fills: fill_range,
             },
         );
+        true
+    }
+
+    /// Most bytes the line and fill buffers may take.
+    pub(crate) fn limits_bytes(&self) -> (u64, u64) {
+        (
+            u64::from(self.line_limit) * size_of::<LineInstance>() as u64,
+            u64::from(self.fill_limit) * size_of::<FillVertex>() as u64,
+        )
     }
 
     /// Takes an entry off the GPU.
@@ -1054,14 +1106,21 @@ fn icon_array(device: &wgpu::Device, queue: &wgpu::Queue, icons: &[Vec<u8>]) -> 
     })
 }
 
-/// A range of `len`, growing the allocator (doubling) when none is free.
-fn allocate(ranges: &mut RangeAllocator, len: u32) -> Range<u32> {
+/// A range of `len`, growing the allocator (doubling, to at most `limit`) when none is
+/// free; `None` when even that leaves no room.
+fn allocate(ranges: &mut RangeAllocator, len: u32, limit: u32) -> Option<Range<u32>> {
     loop {
         if let Some(r) = ranges.allocate(len) {
-            return r;
+            return Some(r);
         }
         let capacity = ranges.capacity();
-        let grown = capacity.saturating_mul(2).max(capacity.saturating_add(len));
+        let grown = capacity
+            .saturating_mul(2)
+            .max(capacity.saturating_add(len))
+            .min(limit);
+        if grown <= capacity {
+            return None;
+        }
         ranges.grow(grown);
     }
 }

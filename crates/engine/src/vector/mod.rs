@@ -85,6 +85,9 @@ pub struct VectorStats {
     pub labels: usize,
     /// Labels drawn in the last frame (the rest had no room, or were out of sight).
     pub labels_drawn: u32,
+    /// Tiles' pieces and chunks at altitude the last rebuild left out: the GPU buffers
+    /// were at their limit ([`VectorLayer::set_gpu_budget`], or the device's).
+    pub left_out: u32,
 }
 
 struct Entry {
@@ -119,6 +122,7 @@ pub struct VectorLayer {
     /// Positions of the features held, and the most its files may bring.
     positions: usize,
     max_positions: usize,
+    gpu_budget: u64,
 }
 
 impl Default for VectorLayer {
@@ -155,6 +159,7 @@ impl VectorLayer {
             stats: VectorStats::default(),
             positions: 0,
             max_positions: DEFAULT_MAX_POSITIONS,
+            gpu_budget: u64::MAX,
         }
     }
 
@@ -163,6 +168,17 @@ impl VectorLayer {
     /// more is read up to the feature that would pass it, with a warning.
     pub fn set_max_positions(&mut self, max: usize) -> &mut Self {
         self.max_positions = max;
+        self
+    }
+
+    /// Limits the GPU buffers of the pieces drawn (lines and fills, half each) to about
+    /// `bytes` (default: only the device's limits). Pieces not drawn in the current frame
+    /// make room first; what still does not fit is left out ([`VectorStats::left_out`]).
+    pub fn set_gpu_budget(&mut self, bytes: u64) -> &mut Self {
+        self.gpu_budget = bytes;
+        self.gpu = None;
+        self.released.clear();
+        self.geometry_changed = true;
         self
     }
 
@@ -453,36 +469,69 @@ impl VectorLayer {
         for key in self.released.drain(..) {
             gpu.remove(key);
         }
-        let mut drawn = Vec::new();
+        // What this frame draws: the drawn tiles with pieces, then every chunk at altitude.
+        let mut wanted = Vec::new();
         for d in frame.drawn_tiles() {
-            let Some(t) = self.tiles.get(&d.key) else {
-                continue;
-            };
-            if t.drape.is_empty() {
-                continue;
+            if self.tiles.get(&d.key).is_some_and(|t| !t.drape.is_empty()) {
+                wanted.push(EntryKey::Tile(d.key));
             }
-            let key = EntryKey::Tile(d.key);
-            if !gpu.has(key) {
-                let mut lines = t.drape.lines.clone();
-                lines.extend_from_slice(&t.drape.points);
-                gpu.insert(frame, key, t.origin, &lines, &t.drape.fills);
-            }
-            drawn.push(key);
         }
         let mut ids: Vec<u32> = self.entries.keys().copied().collect();
         ids.sort_unstable();
         for id in ids {
-            let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref()) else {
-                continue;
-            };
-            for (i, c) in b.chunks.iter().enumerate() {
-                let key = EntryKey::Chunk(id, i as u32);
-                if !gpu.has(key) {
-                    gpu.insert(frame, key, c.origin, &c.lines, &c.fills);
-                }
-                drawn.push(key);
+            if let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref()) {
+                wanted.extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id, i)));
             }
         }
+        let mut drawn = Vec::with_capacity(wanted.len());
+        let (mut made_room, mut left_out) = (false, 0u32);
+        for &key in &wanted {
+            if gpu.has(key) {
+                drawn.push(key);
+                continue;
+            }
+            let insert = |gpu: &mut Gpu| match key {
+                EntryKey::Tile(k) => {
+                    let t = &self.tiles[&k];
+                    let mut lines = t.drape.lines.clone();
+                    lines.extend_from_slice(&t.drape.points);
+                    gpu.insert(frame, key, t.origin, &lines, &t.drape.fills)
+                }
+                EntryKey::Chunk(id, i) => {
+                    let c = &self.entries[&id]
+                        .built
+                        .as_ref()
+                        .expect("a built feature")
+                        .chunks[i as usize];
+                    gpu.insert(frame, key, c.origin, &c.lines, &c.fills)
+                }
+            };
+            let mut fitted = insert(gpu);
+            if !fitted && !made_room {
+                // Entries kept from earlier frames make room before anything drawn is left out.
+                made_room = true;
+                let wanted_set: rustc_hash::FxHashSet<EntryKey> = wanted.iter().copied().collect();
+                let idle: Vec<EntryKey> = gpu.keys().filter(|k| !wanted_set.contains(k)).collect();
+                for k in idle {
+                    gpu.remove(k);
+                }
+                fitted = insert(gpu);
+            }
+            if fitted {
+                drawn.push(key);
+            } else {
+                left_out += 1;
+            }
+        }
+        if left_out > 0 && self.stats.left_out == 0 {
+            tracing::warn!(
+                "vector layer: {left_out} tiles' or chunks' pieces left out of the frame: the GPU \
+                 buffers are at their limit (lines {} MiB, fills {} MiB)",
+                gpu.limits_bytes().0 >> 20,
+                gpu.limits_bytes().1 >> 20
+            );
+        }
+        self.stats.left_out = left_out;
         // Tiles not drawn for a while leave the GPU (their pieces stay on the CPU).
         let now = self.frame;
         let stale: Vec<EntryKey> = gpu
@@ -591,7 +640,8 @@ impl Overlay for VectorLayer {
         let started = Instant::now();
         self.frame += 1;
         if self.gpu.is_none() {
-            self.gpu = Some(Gpu::new(frame));
+            self.gpu = Some(Gpu::new(frame).with_budget(frame.device(), self.gpu_budget));
+            self.geometry_changed = true;
         }
         let built = self.build_pending(frame);
         let draped = self.drape_drawn(frame);
