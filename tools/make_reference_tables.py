@@ -9,6 +9,9 @@
   above the planet and below the ellipsoid.
 * crates/tiling/tests/data/mercantile.json: Web Mercator tiles, quadkeys and bounds computed
   by the mercantile package.
+* crates/geo/tests/data/pvlib_sun.json: the Sun's zenith angle (without refraction) and
+  azimuth seen from places between 78 S and 70 N at moments between 1990 and 2060, by NREL's
+  SPA as pvlib implements it (`pip install pvlib`; run with `sun` to write this table alone).
 
 The tables are committed so the test suite needs neither package; rerun this script only to
 extend them.
@@ -17,13 +20,12 @@ import json
 import os
 import random
 
-import mercantile
-import pyproj
-
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def proj_table():
+    import pyproj
+
     tr = pyproj.Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
     rng = random.Random(4978)
     pts = []
@@ -44,6 +46,8 @@ def proj_table():
 
 
 def mercantile_table():
+    import mercantile
+
     rng = random.Random(3857)
     rows = []
     cases = [(7.6, 46.0, z) for z in range(0, 23)]
@@ -61,6 +65,38 @@ def mercantile_table():
     return {"source": f"mercantile {mercantile.__version__}", "rows": rows}
 
 
+def sun_table():
+    import pandas as pd
+    import pvlib
+
+    rng = random.Random(1985)
+    places = [
+        ("Zurich", 47.37, 8.54, 408.0),
+        ("Sydney", -33.87, 151.21, 39.0),
+        ("Tromso", 69.65, 18.96, 10.0),
+        ("McMurdo", -77.85, 166.67, 10.0),
+        ("Quito", -0.18, -78.47, 2850.0),
+        ("Honolulu", 21.31, -157.86, 5.0),
+        ("Reykjavik", 64.15, -21.94, 20.0),
+        ("Anchorage", 61.22, -149.90, 30.0),
+        ("Singapore", 1.35, 103.82, 15.0),
+        ("Ushuaia", -54.80, -68.30, 20.0),
+    ]
+    start = pd.Timestamp("1990-01-01T00:00:00Z").value // 10**9
+    end = pd.Timestamp("2060-12-31T00:00:00Z").value // 10**9
+    rows = []
+    for name, lat, lon, h in places:
+        times = sorted(rng.randrange(start, end) for _ in range(30))
+        index = pd.DatetimeIndex(pd.to_datetime(times, unit="s", utc=True))
+        sp = pvlib.solarposition.get_solarposition(index, lat, lon, altitude=h, method="nrel_numpy")
+        for t, (_, r) in zip(times, sp.iterrows()):
+            rows.append({
+                "place": name, "unix_s": t, "lat": lat, "lon": lon, "height_m": h,
+                "zenith": round(float(r["zenith"]), 7), "azimuth": round(float(r["azimuth"]), 7),
+            })
+    return {"source": f"pvlib {pvlib.__version__} nrel_numpy (SPA), zenith without refraction", "rows": rows}
+
+
 def write(path, obj):
     path = os.path.join(ROOT, path)
     os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -70,5 +106,11 @@ def write(path, obj):
 
 
 if __name__ == "__main__":
+    import sys
+
+    if sys.argv[1:] == ["sun"]:
+        write("crates/geo/tests/data/pvlib_sun.json", sun_table())
+        sys.exit(0)
+    write("crates/geo/tests/data/pvlib_sun.json", sun_table())
     write("crates/geo/tests/data/proj_wgs84.json", proj_table())
     write("crates/tiling/tests/data/mercantile.json", mercantile_table())

@@ -144,6 +144,10 @@ pub struct ViewArgs {
     /// Close the window after this many seconds (for automated checks).
     #[arg(long)]
     pub exit_after: Option<f64>,
+    /// Light the planet by the Sun of this moment: RFC 3339 (2026-06-21T12:00:00Z), Unix
+    /// seconds or `now` (default: a fixed light from the south-west of the view).
+    #[arg(long)]
+    pub time: Option<String>,
 }
 
 #[derive(Args)]
@@ -180,9 +184,11 @@ pub struct TrafficSceneArgs {
     /// drawn at --time.
     #[arg(long)]
     pub traffic: Option<PathBuf>,
-    /// The moment drawn: RFC 3339 (2018-08-01T12:00:00Z) or Unix seconds (default: the
-    /// record's first moment).
-    #[arg(long, requires = "traffic")]
+    /// The moment drawn, RFC 3339 (2018-08-01T12:00:00Z), Unix seconds or `now`: the Sun
+    /// stands where it stood then (night where it had set), and --traffic's aircraft are
+    /// where they were (default: the record's first moment with --traffic; without it, a
+    /// fixed light from the south-west of the view).
+    #[arg(long)]
     pub time: Option<String>,
     /// Draw one kind of aircraft with a glTF 2.0 binary model: KIND=FILE.glb, KIND one of
     /// light, narrowbody, widebody, helicopter (metres, +Y up, +Z forward; materials named

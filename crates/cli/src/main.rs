@@ -204,6 +204,11 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
     let exit_after = a.exit_after()?;
     let mut globe = args::globe_builder(&a.globe)?;
     let vectors = args::vector_layer(&a.globe, &mut globe)?;
+    let sun_time = a
+        .time
+        .as_deref()
+        .map(|t| traffic_cmd::parse_time(t, "--time"))
+        .transpose()?;
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,
@@ -214,5 +219,6 @@ fn view(a: ViewArgs) -> anyhow::Result<()> {
         exit_after,
         vectors,
         traffic: None,
+        sun_time,
     })
 }

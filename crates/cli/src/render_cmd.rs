@@ -41,7 +41,17 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
+    // The Sun of the moment drawn: --time, or the replay's moment.
+    let sun_time = match (&traffic, &a.traffic.time) {
+        (Some(scene), _) => Some(scene.time_s),
+        (None, Some(t)) => Some(crate::traffic_cmd::parse_time(t, "--time")?),
+        (None, None) => None,
+    };
     let mut off = Headless::new(&builder, width, height)?;
+    if let Some(t) = sun_time {
+        off.globe_mut()
+            .set_lighting(Some(globus_engine::Lighting::at_time(t)));
+    }
     let timeout = Duration::from_secs_f64(a.timeout_s);
     let mut view = args::camera_view(&camera, off.globe(), &a.globe, width, height);
     let progress = LoadProgress::new();

@@ -211,6 +211,11 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
     let v = &a.view;
     let exit_after = v.exit_after()?;
     let (width, height) = args::parse_size(&v.size)?;
+    if v.time.is_some() {
+        bail!(
+            "globus traffic replays from --start (the Sun follows the replay's clock): --time is for view and render"
+        );
+    }
     let mut globe = args::globe_builder(&v.globe)?;
     let vectors = args::vector_layer(&v.globe, &mut globe)?;
     let mut scene = scene(record, a.start.as_deref(), None)?;
@@ -229,6 +234,7 @@ pub fn view(a: TrafficViewArgs) -> anyhow::Result<()> {
         exit_after,
         vectors,
         traffic: Some(viewer::ViewerTraffic::new(scene, a.speed)),
+        sun_time: None,
     })
 }
 
@@ -290,8 +296,11 @@ pub fn run(command: TrafficCommand) -> anyhow::Result<String> {
     }
 }
 
-/// A moment given as RFC 3339 or as Unix seconds, in Unix seconds.
+/// A moment given as RFC 3339, as Unix seconds or as `now`, in Unix seconds.
 pub fn parse_time(text: &str, what: &str) -> anyhow::Result<f64> {
+    if text.trim() == "now" {
+        return Ok(jiff::Timestamp::now().as_millisecond() as f64 / 1000.0);
+    }
     if let Ok(s) = text.trim().parse::<f64>() {
         if s.is_finite() && (0.0..7.0e9).contains(&s) {
             return Ok(s);

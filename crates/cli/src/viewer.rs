@@ -54,8 +54,11 @@ pub struct ViewerOptions {
     pub exit_after: Option<Duration>,
     /// The vector data to draw (see [`crate::args::vector_layer`]).
     pub vectors: Option<VectorLayer>,
-    /// A traffic record replayed over the globe.
+    /// A traffic record replayed over the globe (the Sun follows its clock).
     pub traffic: Option<ViewerTraffic>,
+    /// The Sun of this moment, Unix seconds (without traffic; `None`: a fixed light from the
+    /// south-west of the view).
+    pub sun_time: Option<f64>,
 }
 
 /// A replay shown in the viewer: its clock runs at `speed` seconds of record per second.
@@ -316,7 +319,10 @@ impl State {
         surface.configure(&gpu.device, &config);
         let mut builder = options.globe.clone();
         builder.viewport(config.width, config.height);
-        let globe = builder.build(&gpu, format)?;
+        let mut globe = builder.build(&gpu, format)?;
+        if let Some(t) = options.sun_time {
+            globe.set_lighting(Some(globus_engine::Lighting::at_time(t)));
+        }
         let start = match options.ortho_m {
             Some(m) => options.camera.orthographic_view(
                 &globe,
@@ -599,6 +605,8 @@ impl State {
         self.controller.fly(&self.globe, forward, right, up, dt);
         if let Some(t) = self.traffic.as_mut() {
             t.tick(dt);
+            self.globe
+                .set_lighting(Some(globus_engine::Lighting::at_time(t.scene.time_s)));
             // The camera moves with the followed aircraft before the frame is drawn.
             if let Some(f) = t.follow.as_mut() {
                 let mut view = *self.controller.view();

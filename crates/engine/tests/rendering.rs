@@ -406,3 +406,64 @@ fn refined_terrain_below_the_data_renders_without_holes() {
     assert!(inside > 1_000);
     assert_eq!(holes, 0, "{holes} background pixels inside the silhouette");
 }
+
+/// Mean of the pixels' channel sum in a box (x0..x1, y0..y1) over covered pixels.
+fn mean_brightness(img: &RgbaImage, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> f64 {
+    let (mut sum, mut n) = (0.0, 0u32);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            if covered(img, x, y) {
+                let p = img.get(x, y);
+                sum += f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+                n += 1;
+            }
+        }
+    }
+    assert!(n > 100, "only {n} planet pixels in the box");
+    sum / f64::from(n)
+}
+
+#[test]
+fn the_sun_at_a_moment_lights_the_day_side_and_leaves_the_night_side_dark() {
+    // Straight down on (0, 0) from 15,000 km at the March 2026 equinox: at 12:00 UTC the
+    // Sun stands near the centre, at 00:00 it is behind the planet, at 06:00 it is over
+    // 90 E (the right of the picture) and at 18:00 over 90 W (the left).
+    let (w, h) = (240u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let view = camera(0.0, 0.0, 15_000_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let dir = globus_test_support::output_dir("rendering");
+    let mut shot = |name: &str, unix_s: f64| {
+        off.globe_mut()
+            .set_lighting(Some(globus_engine::Lighting::at_time(unix_s)));
+        let frame = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
+        save_png(&frame.image, &dir.join(format!("sun_{name}.png"))).expect("save");
+        frame.image
+    };
+    // 2026-03-20T12:00:00Z and the hours around it.
+    let noon = 1_774_008_000.0;
+    let day = shot("noon", noon);
+    let night = shot("midnight", noon - 43_200.0);
+    let morning = shot("0600", noon - 21_600.0);
+    let evening = shot("1800", noon + 21_600.0);
+    let centre = (100, 140);
+    let (d, n) = (
+        mean_brightness(&day, centre, centre),
+        mean_brightness(&night, centre, centre),
+    );
+    assert!(d > 4.0 * n, "day {d:.0}, night {n:.0}");
+    // The planet's disc spans about x 57..183: its left and right thirds.
+    let (left, right) = ((62, 100), (140, 178));
+    let rows = (100, 140);
+    let (ml, mr) = (
+        mean_brightness(&morning, left, rows),
+        mean_brightness(&morning, right, rows),
+    );
+    assert!(mr > 3.0 * ml, "06:00: right {mr:.0}, left {ml:.0}");
+    let (el, er) = (
+        mean_brightness(&evening, left, rows),
+        mean_brightness(&evening, right, rows),
+    );
+    assert!(el > 3.0 * er, "18:00: left {el:.0}, right {er:.0}");
+}

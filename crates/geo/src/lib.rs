@@ -7,6 +7,7 @@
 //! * [`View`] and [`Frustum`]: a camera in f64 ECEF (perspective or orthographic) and the
 //!   planes of what it sees.
 //! * [`EllipsoidalOccluder`]: horizon culling (Cesium's ellipsoid-scaled occluder point).
+//! * [`SunPosition`]: where the Sun is at a moment (Meeus/NOAA, checked against NREL's SPA).
 //!
 //! Everything is in metres and radians, f64, in Earth-centred Earth-fixed (ECEF) coordinates
 //! unless the name says otherwise. The only dependency is `glam`.
@@ -16,6 +17,7 @@ mod cartographic;
 mod ellipsoid;
 mod frustum;
 mod horizon;
+mod sun;
 mod view;
 
 pub use bounds::{BoundingSphere, OrientedBox};
@@ -24,4 +26,5 @@ pub use ellipsoid::{Ellipsoid, EnuFrame};
 pub use frustum::{Frustum, Intersection, Plane};
 pub use glam::{DMat3, DMat4, DQuat, DVec2, DVec3, DVec4};
 pub use horizon::EllipsoidalOccluder;
+pub use sun::SunPosition;
 pub use view::{Projection, View};

@@ -62,6 +62,15 @@ pub struct Lighting {
 }
 
 impl Lighting {
+    /// The real Sun at `unix_s` seconds since 1970-01-01 00:00 UTC
+    /// ([`globus_geo::SunPosition`]): the night side is lit by the ambient term alone.
+    pub fn at_time(unix_s: f64) -> Self {
+        Self {
+            sun_direction: globus_geo::SunPosition::at(unix_s).direction(),
+            ..Self::sun_over(0.0, 0.0)
+        }
+    }
+
     /// A sun standing over the given longitude and latitude (radians).
     pub fn sun_over(lon_rad: f64, lat_rad: f64) -> Self {
         let (sl, cl) = lat_rad.sin_cos();
