@@ -42,8 +42,13 @@ use crate::{EngineError, GlobeBuilder};
 const FRAME_BYTES_PER_PIXEL: u64 = 16;
 /// What a software rasteriser (lavapipe) takes at its first draw, on top of the footprint
 /// measured before it: compiled shaders and binned geometry. Measured on the README's Alps
-/// example: about 125 MiB fixed, and more with the triangles drawn.
+/// example: about 125 MiB fixed, and more with the triangles drawn...
 const SOFTWARE_RASTER_BYTES: u64 = 128 << 20;
+/// ...about 170 bytes a triangle drawn (binned vertices and their setup), measured over the
+/// Alps dive. A memory budget gives the triangles this share of the total, and the error
+/// bound rises when a frame draws more.
+const SOFTWARE_BYTES_PER_TRIANGLE: u64 = 170;
+const SOFTWARE_TRIANGLE_SHARE: u64 = 8;
 
 /// What one frame did.
 #[derive(Clone, Copy, Debug, Default)]
@@ -136,6 +141,13 @@ pub struct Globe {
     request_lookahead_frames: f64,
     last_eye: Option<DVec3>,
     memory: Option<MemoryPlan>,
+    /// On a software rasteriser under a memory budget, the most triangles a frame may draw
+    /// ([`SOFTWARE_BYTES_PER_TRIANGLE`] each), and whether the last frame drew more.
+    max_triangles: Option<u64>,
+    over_triangles: bool,
+    /// Whether the last frame drew under 3/4 of them (the bound may relax only then, so it
+    /// does not swing about the limit).
+    triangle_room: bool,
     /// The camera of the last update.
     camera: Option<FrameCamera>,
     /// The camera of the last render (what the targets hold).
@@ -178,7 +190,11 @@ impl Globe {
                 resident_bytes().map(|r| {
                     r + frame_bytes
                         + settings.reserved_bytes
-                        + if software { SOFTWARE_RASTER_BYTES } else { 0 }
+                        + if software {
+                            SOFTWARE_RASTER_BYTES + total / SOFTWARE_TRIANGLE_SHARE
+                        } else {
+                            0
+                        }
                 }),
                 // The terrain layer's loaders and as many for colour.
                 2 * workers,
@@ -221,6 +237,12 @@ impl Globe {
             selection: Selection::default(),
             plan: FramePlan::default(),
             lighting: None,
+            max_triangles: settings
+                .memory_bytes
+                .filter(|_| software)
+                .map(|total| total / SOFTWARE_TRIANGLE_SHARE / SOFTWARE_BYTES_PER_TRIANGLE),
+            over_triangles: false,
+            triangle_room: true,
             relax_detail: true,
             quality: settings.quality.map(QualityLoop::new),
             request_lookahead_frames: settings.request_lookahead_frames,
@@ -459,7 +481,7 @@ impl Globe {
             &self.plan,
             &self.selection.draw,
         );
-        self.adapt_detail(residency.pool_full || layer_stats.over_budget);
+        self.adapt_detail(residency.pool_full || layer_stats.over_budget || self.over_triangles);
 
         // Draw list.
         let lighting = self
@@ -479,6 +501,10 @@ impl Globe {
                 tiles: &tiles,
             },
         );
+        self.over_triangles = self.max_triangles.is_some_and(|m| draw.triangles > m);
+        self.triangle_room = self
+            .max_triangles
+            .is_none_or(|m| draw.triangles * 4 < m * 3);
         FrameReport {
             selection: self.selection.stats,
             select_us,
@@ -511,7 +537,8 @@ impl Globe {
         } else if *sse < floor {
             // The frame-time loop asks for less detail.
             *sse = floor;
-        } else if self.relax_detail && needed < capacity * 0.6 && *sse > floor {
+        } else if self.relax_detail && needed < capacity * 0.6 && self.triangle_room && *sse > floor
+        {
             *sse = (*sse / 1.1).max(floor);
         }
     }

@@ -1,7 +1,9 @@
 //! One memory budget for everything Globus holds (`memory_mb` in the config file,
 //! `--memory-mb`): the process as it stands before any tile (code, GPU driver, targets,
 //! vector features already read: measured when the globe is made, plus what a software
-//! rasteriser's first draw adds and what overlays reserved for their GPU buffers),
+//! rasteriser's first draw adds, an eighth of the total for the triangles it bins (the
+//! error bound rises when a frame draws more) and what overlays reserved for their GPU
+//! buffers),
 //! headroom for loads in flight and allocator slack, the decoded source tiles and
 //! refinement bases of the data sources, the GPU tile pools (counted
 //! in full: on a software rasteriser they are host memory, on a GPU they are video memory an
