@@ -208,9 +208,10 @@ pub struct BenchArgs {
     /// of whole frames with and without the traffic.
     #[arg(long, conflicts_with_all = ["from", "to", "soak"])]
     pub traffic: Option<PathBuf>,
-    /// Traffic benchmark: the first moment replayed (RFC 3339 or Unix seconds; default: when
-    /// the most aircraft are in the air).
-    #[arg(long, requires = "traffic")]
+    /// The moment whose Sun lights the frames (RFC 3339, Unix seconds or `now`; default: a
+    /// fixed light from the south-west of the view); with --traffic, the first moment
+    /// replayed (default: when the most aircraft are in the air), whose Sun lights them.
+    #[arg(long)]
     pub time: Option<String>,
     /// Traffic benchmark: seconds of record per second of frames.
     #[arg(

@@ -308,7 +308,9 @@ pub fn parse_time(text: &str, what: &str) -> anyhow::Result<f64> {
         bail!("{what} {text:?} is not a Unix time from 1970 to 2191");
     }
     let t: jiff::Timestamp = text.trim().parse().with_context(|| {
-        format!("{what} {text:?} is neither RFC 3339 (2018-08-01T12:00:00Z) nor Unix seconds")
+        format!(
+            "{what} {text:?} is neither RFC 3339 (2018-08-01T12:00:00Z), Unix seconds nor `now`"
+        )
     })?;
     let s = t.as_millisecond() as f64 / 1000.0;
     if !(0.0..7.0e9).contains(&s) {

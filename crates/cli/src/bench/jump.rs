@@ -33,6 +33,7 @@ pub fn run(
     let to = args::parse_camera(to, false).context("--to")?;
     let fov = a.globe.fov_deg;
     let mut off = Headless::new(builder, width, height)?;
+    super::light(a, &mut off)?;
     off.globe_mut().layer_mut().track_usage();
     let view_a = from.view(off.globe(), fov, width, height);
     let settled = off.render_complete(&view_a, Duration::from_secs(300), &mut [])?;

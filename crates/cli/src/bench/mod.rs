@@ -8,12 +8,27 @@ mod soak;
 mod traffic;
 
 use anyhow::bail;
+use globus_engine::Headless;
 
 use crate::args::{self, BenchArgs};
+
+/// Lights the frames by the Sun of `--time`, if given (the traffic benchmark lights them by
+/// the replay's moment itself).
+fn light(a: &BenchArgs, off: &mut Headless) -> anyhow::Result<()> {
+    if let Some(t) = &a.time {
+        let t = crate::traffic_cmd::parse_time(t, "--time")?;
+        off.globe_mut()
+            .set_lighting(Some(globus_engine::Lighting::at_time(t)));
+    }
+    Ok(())
+}
 
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
     let builder = args::globe_builder(&a.globe)?;
+    if let Some(t) = &a.time {
+        crate::traffic_cmd::parse_time(t, "--time")?;
+    }
     if !(a.fps > 0.0 && a.fps <= 1000.0) {
         bail!("--fps {} must be above 0 and at most 1000", a.fps);
     }

@@ -67,6 +67,7 @@ pub fn run(
     let builder = &builder;
     let mut vector_samples: Vec<(f64, bool, u32)> = Vec::new();
     let mut off = Headless::new(builder, width, height)?;
+    super::light(a, &mut off)?;
     let fov = a.globe.fov_deg;
     let origin = path_file.display().to_string();
     if builder.uses_real_data() {

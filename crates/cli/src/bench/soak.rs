@@ -67,6 +67,7 @@ pub fn run(
     (width, height): (u32, u32),
 ) -> anyhow::Result<()> {
     let mut off = Headless::new(builder, width, height)?;
+    super::light(a, &mut off)?;
     let mut uniform = Uniform(0x2545_F491_4F6C_DD1D);
     let (mut from, mut to) = (uniform.pose(), uniform.pose());
     let started = Instant::now();

@@ -48,6 +48,8 @@ pub fn run(
         None => traffic_cmd::default_camera(&scene.replay),
     };
     let mut off = Headless::new(builder, width, height)?;
+    off.globe_mut()
+        .set_lighting(Some(globus_engine::Lighting::at_time(scene.time_s)));
     let view = args::camera_view(&camera, off.globe(), &a.globe, width, height);
     // The terrain complete first, then one frame with the traffic (pipelines are made in the
     // first), so the figures time the replay alone.
