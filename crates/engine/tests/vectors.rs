@@ -10,9 +10,15 @@ use std::path::Path;
 use std::time::Duration;
 
 use globus_engine::{
-    CameraSpec, Cartographic, DVec3, GlobeBuilder, Headless, RgbaImage, StyleRules, VectorLayer,
-    View, save_png,
+    CameraSpec, Cartographic, DVec3, Globe, GlobeBuilder, Headless, RgbaImage, StyleRules,
+    VectorLayer, View, save_png,
 };
+
+/// The point of the loaded ground at a longitude and latitude (degrees).
+fn on_ground(globe: &Globe, lon_deg: f64, lat_deg: f64) -> DVec3 {
+    let (lon, lat) = (lon_deg.to_radians(), lat_deg.to_radians());
+    globe.world_position(Cartographic::new(lon, lat, globe.ground_height_m(lon, lat)))
+}
 
 const TIMEOUT: Duration = Duration::from_secs(300);
 
@@ -117,12 +123,7 @@ fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
         let (from, to) = ((lon - span).max(11.05), (lon + span).min(11.95));
         for s in 0..=4000 {
             let lon = from + (to - from) * f64::from(s) / 4000.0;
-            let (lon_r, lat_r) = (lon.to_radians(), LINE_LAT.to_radians());
-            let at = globe.world_position(Cartographic::new(
-                lon_r,
-                lat_r,
-                globe.ground_height_m(lon_r, lat_r),
-            ));
+            let at = on_ground(globe, lon, LINE_LAT);
             let Some(px) = camera.project(at) else {
                 continue;
             };
@@ -146,11 +147,7 @@ fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
             // Width across the line: summed coverage along the pixel column (the line runs
             // east-west, so across the screen), corrected for its slope there.
             if s % 40 == 0 {
-                let next = globe.world_position(Cartographic::new(
-                    (lon + 0.0005).to_radians(),
-                    lat_r,
-                    globe.ground_height_m((lon + 0.0005).to_radians(), lat_r),
-                ));
+                let next = on_ground(globe, lon + 0.0005, LINE_LAT);
                 let Some(q) = camera.project(next) else {
                     continue;
                 };
@@ -462,10 +459,9 @@ fn updates_cost_what_changed_and_an_unchanged_frame_rebuilds_nothing() {
     let id = layer.add(line("#ff00ff"));
     let drawn = frame(&mut off, &mut layer);
     let globe = off.globe();
-    let (lon, lat) = (7.45f64.to_radians(), 46.25f64.to_radians());
-    let on_ground =
-        globe.world_position(Cartographic::new(lon, lat, globe.ground_height_m(lon, lat)));
-    let q = camera.project(on_ground).expect("in view");
+    let q = camera
+        .project(on_ground(globe, 7.45, 46.25))
+        .expect("in view");
     let (lx, ly) = (q.x as u32, q.y as u32);
     let magenta = drawn.get(lx, ly);
     assert!(
@@ -1314,9 +1310,7 @@ fn a_million_vertex_line_draws_in_bounded_instances_where_the_cpu_puts_it() {
     let camera = *globe.camera().expect("a frame camera");
     let (mut expected, mut hit) = (0usize, 0usize);
     for p in coast.iter().step_by(250) {
-        let (lon, lat) = (p[0].to_radians(), p[1].to_radians());
-        let at = globe.world_position(Cartographic::new(lon, lat, globe.ground_height_m(lon, lat)));
-        let Some(px) = camera.project(at) else {
+        let Some(px) = camera.project(on_ground(globe, p[0], p[1])) else {
             continue;
         };
         let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
@@ -1379,13 +1373,7 @@ fn a_polygon_of_200000_vertices_fills_what_a_cpu_point_in_polygon_fills_in_bound
         for i in 0..60 {
             let lon = 6.8 + 1.4 * f64::from(i) / 59.0;
             let lat = 45.95 + 0.9 * f64::from(j) / 59.0;
-            let (lon_r, lat_r) = (lon.to_radians(), lat.to_radians());
-            let at = globe.world_position(Cartographic::new(
-                lon_r,
-                lat_r,
-                globe.ground_height_m(lon_r, lat_r),
-            ));
-            let Some(px) = camera.project(at) else {
+            let Some(px) = camera.project(on_ground(globe, lon, lat)) else {
                 continue;
             };
             let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);

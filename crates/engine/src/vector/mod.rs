@@ -433,13 +433,17 @@ impl VectorLayer {
             self.tiles
                 .retain(|_, t| t.last_used >= cut || t.last_used == now);
         }
+        // The kept pieces grow only when a tile is draped.
         let now = self.frame;
-        let kept: usize = self
-            .tiles
-            .values()
-            .filter(|t| t.last_used != now)
-            .map(|t| t.drape.bytes())
-            .sum();
+        let kept: usize = if draped == 0 {
+            0
+        } else {
+            self.tiles
+                .values()
+                .filter(|t| t.last_used != now)
+                .map(|t| t.drape.bytes())
+                .sum()
+        };
         if kept > KEPT_BYTES {
             let mut old: Vec<(u64, TileKey, usize)> = self
                 .tiles
