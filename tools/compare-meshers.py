@@ -3,8 +3,11 @@
 pydelatin, side by side on the same 513 x 513 grids, in one run.
 
     python3 tools/compare-meshers.py [--runs 15] [--errors 1,5,30]
+        [--png TILE.png [--encoding terrarium|mapbox]]...
 
-Grids: a 513 x 513 window of ../shared/data/N57E011.hgt (the void-free window with the most
+Grids: any elevation PNG tiles given with --png (square; a 2^k-sample tile, as XYZ services
+serve them, gets its last row and column repeated to make the 2^k + 1 grid RTIN needs), or by
+default a 513 x 513 window of ../shared/data/N57E011.hgt (the void-free window with the most
 relief) and a synthetic mountain range (spectral fBm with ridges, 0-3000 m, fixed seed). Both
 are written as Terrarium PNG for globus and decoded back to the same f32 values for the peers,
 so every tool meshes identical heights.
@@ -72,6 +75,27 @@ def synthetic_mountains(seed=7):
     return h, "synthetic ridged fBm, 0-3000 m"
 
 
+def png_grid(path, encoding):
+    """Heights of an elevation PNG (Terrarium or Mapbox Terrain-RGB), padded to 2^k + 1."""
+    rgb = np.asarray(Image.open(path).convert("RGB")).astype(np.float64)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    if encoding == "terrarium":
+        h = r * 256.0 + g + b / 256.0 - 32768.0
+    elif encoding == "mapbox":
+        h = -10000.0 + (r * 65536.0 + g * 256.0 + b) * 0.1
+    else:
+        sys.exit(f"unknown encoding {encoding!r} (terrarium or mapbox)")
+    rows, cols = h.shape
+    if rows != cols:
+        sys.exit(f"{path}: {cols} x {rows} is not square")
+    n = rows
+    if n & (n - 1) == 0:
+        h = np.pad(h, ((0, 1), (0, 1)), mode="edge")
+    elif (n - 1) & (n - 2) != 0 or n < 3:
+        sys.exit(f"{path}: {n} samples per side is neither 2^k nor 2^k + 1")
+    return h, f"{os.path.basename(path)} ({encoding}, {n} x {n})"
+
+
 def terrarium(h):
     v = np.clip(np.round((h + 32768.0) * 256.0), 0, 2 ** 24 - 1).astype(np.uint32)
     rgb = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=-1).astype(np.uint8)
@@ -126,8 +150,8 @@ def run_globus(png, method, err, runs, dump, threads=1):
     return r["build_ms"], m["vertices"], m["triangles"]
 
 
-def run_martini(script, raw, err, runs, dump):
-    out = subprocess.run(["node", script, raw, str(SIDE), str(err), str(runs), dump],
+def run_martini(script, raw, side, err, runs, dump):
+    out = subprocess.run(["node", script, raw, str(side), str(err), str(runs), dump],
                          check=True, capture_output=True, text=True).stdout
     r = json.loads(out)
     with open(dump) as f:
@@ -148,17 +172,18 @@ def median_time(fn, runs):
 
 def run_pymartini(h, err, runs):
     from pymartini import Martini
-    martini = Martini(SIDE)
+    martini = Martini(h.shape[0])
     ms, (v, t) = median_time(lambda: martini.create_tile(h).get_mesh(err), runs)
     return ms, v, t
 
 
 def run_pydelatin(h, err, runs):
     from pydelatin import Delatin
-    ms, tin = median_time(lambda: Delatin(h, width=SIDE, height=SIDE, max_error=err), runs)
-    # pydelatin's y runs north (up): row = SIDE - 1 - y.
+    side = h.shape[0]
+    ms, tin = median_time(lambda: Delatin(h, width=side, height=side, max_error=err), runs)
+    # pydelatin's y runs north (up): row = side - 1 - y.
     v = np.rint(tin.vertices[:, :2]).astype(np.int64)
-    v[:, 1] = SIDE - 1 - v[:, 1]
+    v[:, 1] = side - 1 - v[:, 1]
     return ms, v, tin.triangles
 
 
@@ -166,12 +191,18 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=15)
     ap.add_argument("--errors", default="1,5,30")
+    ap.add_argument("--png", action="append", default=[], help="an elevation PNG tile (repeatable)")
+    ap.add_argument("--encoding", default="terrarium", help="of the --png tiles: terrarium or mapbox")
     args = ap.parse_args()
     errors = [float(e) for e in args.errors.split(",")]
     martini_js = ensure_martini()
     work = tempfile.mkdtemp(prefix="compare-meshers-")
     rows = []
-    for name, (h, what) in [("srtm", srtm_window()), ("mountains", synthetic_mountains())]:
+    if args.png:
+        grids = [(os.path.splitext(os.path.basename(p))[0], png_grid(p, args.encoding)) for p in args.png]
+    else:
+        grids = [("srtm", srtm_window()), ("mountains", synthetic_mountains())]
+    for name, (h, what) in grids:
         rgb, hf = terrarium(h)
         png = os.path.join(work, f"{name}.png")
         Image.fromarray(rgb, "RGB").save(png)
@@ -183,7 +214,7 @@ def main():
             results = {}
             results["globus rtin"] = run_globus(png, "rtin", err, args.runs, dump)
             results["globus rtin, 2 threads"] = run_globus(png, "rtin", err, args.runs, dump, threads=2)
-            results["martini (node)"] = run_martini(martini_js, raw, err, args.runs, dump)
+            results["martini (node)"] = run_martini(martini_js, raw, hf.shape[0], err, args.runs, dump)
             results["pymartini"] = run_pymartini(hf, err, args.runs)
             results["globus decimate"] = run_globus(png, "decimate", err, max(3, args.runs // 5), dump)
             results["pydelatin"] = run_pydelatin(hf, err, max(3, args.runs // 5))

@@ -24,6 +24,7 @@
 //! quantized-mesh terrain does the same), which also cover neighbours at other levels; see
 //! [`AdaptiveMesh::edge_vertices`] for the skirt input.
 
+mod rows;
 mod rtin;
 
 pub use rtin::{Rtin, RtinScratch};

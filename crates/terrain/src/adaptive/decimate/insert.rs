@@ -5,7 +5,8 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::{orient, scan_triangle};
+use super::orient;
+use super::scan::{Scanner, Verdict};
 use crate::adaptive::HeightGrid;
 
 const NONE: u32 = u32::MAX;
@@ -15,7 +16,7 @@ const NONE: u32 = u32::MAX;
 pub(super) fn refine(grid: &HeightGrid, max_error: f64) -> (Vec<[u16; 2]>, Vec<[u32; 3]>) {
     let n = (grid.side() - 1) as u16;
     let mut r = Refiner {
-        grid,
+        scanner: Scanner::new(grid, max_error as f32),
         points: vec![[0, 0], [n, 0], [n, n], [0, n]],
         tris: Vec::new(),
         twin: Vec::new(),
@@ -29,18 +30,10 @@ pub(super) fn refine(grid: &HeightGrid, max_error: f64) -> (Vec<[u16; 2]>, Vec<[
     r.push_triangle([2, 0, 3]);
     r.link(0, 3);
     r.rescan_pending();
-    let limit = max_error as f32;
-    while let Some(Entry {
-        error,
-        tri,
-        version,
-    }) = r.queue.pop()
-    {
+    // Only triangles beyond the bound are queued.
+    while let Some(Entry { tri, version, .. }) = r.queue.pop() {
         if r.version[tri as usize] != version {
             continue;
-        }
-        if error <= limit {
-            break;
         }
         let p = r.candidate[tri as usize];
         r.insert(tri, p);
@@ -74,7 +67,7 @@ impl Ord for Entry {
 }
 
 struct Refiner<'a> {
-    grid: &'a HeightGrid,
+    scanner: Scanner<'a>,
     points: Vec<[u16; 2]>,
     tris: Vec<u32>,
     twin: Vec<u32>,
@@ -138,9 +131,8 @@ impl Refiner<'_> {
                 self.point(self.tris[i + 1]),
                 self.point(self.tris[i + 2]),
             ];
-            let (error, at) = scan_triangle(self.grid, p);
-            self.candidate[t as usize] = at;
-            if error > 0.0 {
+            if let Verdict::Beyond((error, at)) = self.scanner.check(p, false) {
+                self.candidate[t as usize] = at;
                 let version = self.version[t as usize];
                 self.queue.push(Entry {
                     error,

@@ -17,11 +17,16 @@
 //!    triangle larger than `max_triangle_area` is kept, so large flat triangles (sea) do not
 //!    grow into land.
 //!
+//! Both passes scan triangles with one scanner (`scan.rs`): f32 lanes over row spans, and the exact
+//! f64 scan only where the f32 value is within its rounding of the bound, so every decision
+//! against the bound is the exact one.
+//!
 //! Insertion overshoots: samples inserted early to fix a large error often become redundant
 //! once their neighbours are in; the removal pass takes those out again.
 
 mod insert;
 mod remove;
+mod scan;
 
 use super::{AdaptiveMesh, HeightGrid};
 
@@ -95,65 +100,6 @@ pub(super) fn orient(a: [u16; 2], b: [u16; 2], c: [u16; 2]) -> i64 {
     let [bx, by] = b.map(i64::from);
     let [cx, cy] = c.map(i64::from);
     (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-}
-
-/// The largest |height - plane| over the samples in triangle `p` other than its corners, and
-/// where it is. Each row's extent comes from the three edge functions exactly (integers), so
-/// only samples inside are visited.
-pub(super) fn scan_triangle(grid: &HeightGrid, p: [[u16; 2]; 3]) -> (f32, [u16; 2]) {
-    let side = grid.side();
-    let h = grid.heights();
-    let q = p.map(|[x, y]| [i64::from(x), i64::from(y)]);
-    let z = p.map(|[x, y]| f64::from(grid.at(usize::from(x), usize::from(y))));
-    let area = orient(p[0], p[1], p[2]);
-    if area == 0 {
-        return (0.0, p[0]);
-    }
-    let s = area.signum();
-    // w_k(x, y) = a_k x + b_k y + c_k >= 0 inside, for the edge opposite vertex k.
-    let coeff = |i: usize, j: usize| {
-        let (a, b) = (q[i], q[j]);
-        let (ca, cb) = (-s * (b[1] - a[1]), s * (b[0] - a[0]));
-        (ca, cb, -(ca * a[0] + cb * a[1]))
-    };
-    let w = [coeff(1, 2), coeff(2, 0), coeff(0, 1)];
-    let inv = 1.0 / (area * s) as f64;
-    let dz_dx = (w[0].0 as f64 * z[0] + w[1].0 as f64 * z[1] + w[2].0 as f64 * z[2]) * inv;
-    let y0 = q[0][1].min(q[1][1]).min(q[2][1]);
-    let y1 = q[0][1].max(q[1][1]).max(q[2][1]);
-    let x_min = q[0][0].min(q[1][0]).min(q[2][0]);
-    let x_max = q[0][0].max(q[1][0]).max(q[2][0]);
-    let mut best = (0.0f32, p[0]);
-    for y in y0..=y1 {
-        let (mut lo, mut hi) = (x_min, x_max);
-        for &(a, b, c) in &w {
-            let rest = b * y + c; // a x + rest >= 0
-            if a > 0 {
-                lo = lo.max((-rest).div_euclid(a) + i64::from((-rest).rem_euclid(a) != 0));
-            } else if a < 0 {
-                hi = hi.min(rest.div_euclid(-a));
-            } else if rest < 0 {
-                hi = lo - 1;
-            }
-        }
-        if lo > hi {
-            continue;
-        }
-        let wl: f64 = w
-            .iter()
-            .zip(&z)
-            .map(|(&(a, b, c), &zk)| (a * lo + b * y + c) as f64 * zk)
-            .sum();
-        let start = wl * inv;
-        let row = &h[y as usize * side + lo as usize..=y as usize * side + hi as usize];
-        for (k, &v) in row.iter().enumerate() {
-            let d = (f64::from(v) - (start + dz_dx * k as f64)).abs() as f32;
-            if d > best.0 {
-                best = (d, [(lo + k as i64) as u16, y as u16]);
-            }
-        }
-    }
-    best
 }
 
 #[cfg(test)]

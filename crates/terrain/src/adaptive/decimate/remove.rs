@@ -4,7 +4,8 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::{DecimateOptions, orient, scan_triangle};
+use super::scan::{Scanner, Verdict};
+use super::{DecimateOptions, orient};
 use crate::adaptive::HeightGrid;
 
 /// Removes interior vertices while the bound holds; returns the surviving triangles.
@@ -20,7 +21,9 @@ pub(super) fn remove_vertices(
         tris: triangles,
         alive: Vec::new(),
         fans: vec![Vec::new(); points.len()],
-        limit: options.max_error as f32,
+        limit: options.max_error,
+        scanner: Scanner::new(grid, options.max_error as f32),
+        scratch: Scratch::default(),
     };
     m.alive = vec![true; m.tris.len()];
     for (t, tri) in m.tris.iter().enumerate() {
@@ -116,7 +119,19 @@ struct Soup<'a> {
     alive: Vec<bool>,
     /// Per vertex, its live triangles.
     fans: Vec<Vec<u32>>,
-    limit: f32,
+    limit: f64,
+    scanner: Scanner<'a>,
+    scratch: Scratch,
+}
+
+/// Buffers of one removal, kept from vertex to vertex.
+#[derive(Default)]
+struct Scratch {
+    poly: Vec<u32>,
+    /// Per polygon vertex: the error of its ear as last scanned (`None`: beyond the bound),
+    /// with the neighbours it was scanned with.
+    ears: Vec<Option<(u32, u32, Option<f32>)>>,
+    new_tris: Vec<[u32; 3]>,
 }
 
 impl Soup<'_> {
@@ -180,18 +195,78 @@ impl Soup<'_> {
     /// Removes `v` and fills the hole by ear clipping (the ear with the smallest error first);
     /// keeps the change only if every new triangle is within the bound.
     fn try_remove(&mut self, v: u32, ring: &[u32]) -> bool {
-        let mut poly = ring.to_vec();
-        let mut new_tris = Vec::with_capacity(ring.len() - 2);
+        // The new triangles' planes at v are convex combinations of the ring's heights, so a
+        // vertex further than the bound outside their range cannot go.
+        let height = |x: u32| self.position(x)[2];
+        let (low, high) = ring
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &r| {
+                (l.min(height(r)), h.max(height(r)))
+            });
+        let z = height(v);
+        if z > high + self.limit || z < low - self.limit {
+            return false;
+        }
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let done = self.clip_ears(ring, &mut scratch);
+        if done {
+            for t in std::mem::take(&mut self.fans[v as usize]) {
+                self.alive[t as usize] = false;
+                for &r in &self.tris[t as usize] {
+                    if r != v {
+                        self.fans[r as usize].retain(|&x| x != t);
+                    }
+                }
+            }
+            for &tri in &scratch.new_tris {
+                let t = self.tris.len() as u32;
+                self.tris.push(tri);
+                self.alive.push(true);
+                for r in tri {
+                    self.fans[r as usize].push(t);
+                }
+            }
+        }
+        self.scratch = scratch;
+        done
+    }
+
+    /// Triangulates the polygon `ring` into `scratch.new_tris`, cheapest ear first; false if
+    /// some step has no ear within the bound. An ear's scan is kept until one of its
+    /// neighbours changes.
+    fn clip_ears(&self, ring: &[u32], scratch: &mut Scratch) -> bool {
+        let Scratch {
+            poly,
+            ears,
+            new_tris,
+        } = scratch;
+        poly.clear();
+        poly.extend_from_slice(ring);
+        ears.clear();
+        ears.resize(poly.len(), None);
+        new_tris.clear();
         while poly.len() > 3 {
             let k = poly.len();
             let mut best: Option<(f32, usize)> = None;
             for i in 0..k {
                 let (a, b, c) = (poly[(i + k - 1) % k], poly[i], poly[(i + 1) % k]);
-                if !self.is_ear(&poly, a, b, c) {
+                if !self.is_ear(poly, a, b, c) {
                     continue;
                 }
-                let (err, _) = scan_triangle(self.grid, [a, b, c].map(|x| self.points[x as usize]));
-                if err <= self.limit && best.is_none_or(|(e, _)| err < e) {
+                let err = match ears[i] {
+                    Some((ea, ec, err)) if ea == a && ec == c => err,
+                    _ => {
+                        let err = match self.scanner.check(self.corners([a, b, c]), true) {
+                            Verdict::Within(e) => Some(e),
+                            Verdict::Beyond(_) => None,
+                        };
+                        ears[i] = Some((a, c, err));
+                        err
+                    }
+                };
+                if let Some(err) = err
+                    && best.is_none_or(|(e, _)| err < e)
+                {
                     best = Some((err, i));
                 }
             }
@@ -200,30 +275,21 @@ impl Soup<'_> {
             };
             new_tris.push([poly[(i + k - 1) % k], poly[i], poly[(i + 1) % k]]);
             poly.remove(i);
+            ears.remove(i);
         }
         let last = [poly[0], poly[1], poly[2]];
-        let p = last.map(|x| self.points[x as usize]);
-        if orient(p[0], p[1], p[2]) >= 0 || scan_triangle(self.grid, p).0 > self.limit {
+        let p = self.corners(last);
+        if orient(p[0], p[1], p[2]) >= 0
+            || matches!(self.scanner.check(p, true), Verdict::Beyond(_))
+        {
             return false;
         }
         new_tris.push(last);
-        for t in std::mem::take(&mut self.fans[v as usize]) {
-            self.alive[t as usize] = false;
-            for &r in &self.tris[t as usize] {
-                if r != v {
-                    self.fans[r as usize].retain(|&x| x != t);
-                }
-            }
-        }
-        for tri in new_tris {
-            let t = self.tris.len() as u32;
-            self.tris.push(tri);
-            self.alive.push(true);
-            for r in tri {
-                self.fans[r as usize].push(t);
-            }
-        }
         true
+    }
+
+    fn corners(&self, t: [u32; 3]) -> [[u16; 2]; 3] {
+        t.map(|x| self.points[x as usize])
     }
 
     /// Whether (a, b, c) is a proper ear of `poly`: wound like the mesh and with no other

@@ -23,6 +23,8 @@
 
 use rayon::prelude::*;
 
+use crate::adaptive::rows::{larger, row_deviation};
+
 /// Levels up to this square size are computed across squares, larger ones, whose triangles
 /// have long rows, along rows.
 const ACROSS_SQUARES_UP_TO: usize = 16;
@@ -550,41 +552,4 @@ pub(super) fn combine(errors: &mut [f32], scratch: &Scratch, side: usize, s: usi
             errors[at(x + half, y + half)] = e;
         }
     }
-}
-
-/// The larger of two finite values: compare-and-select, cheaper than `f32::max` and its NaN
-/// rules.
-#[inline(always)]
-fn larger(a: f32, b: f32) -> f32 {
-    if b > a { b } else { a }
-}
-
-/// max |row[k] - (start + step * k)|, in lanes the compiler vectorises (compare-and-select
-/// instead of `f32::max`, whose NaN rules keep it scalar; heights are finite).
-#[inline(always)]
-fn row_deviation(row: &[f32], start: f32, step: f32) -> f32 {
-    const LANES: usize = 8;
-    const OFFSETS: [f32; LANES] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
-    let mut acc = [0.0f32; LANES];
-    let chunks = row.chunks_exact(LANES);
-    let tail = chunks.remainder();
-    let mut base = start;
-    let mut done = 0usize;
-    for chunk in chunks {
-        for k in 0..LANES {
-            let d = (chunk[k] - (base + step * OFFSETS[k])).abs();
-            acc[k] = larger(acc[k], d);
-        }
-        done += LANES;
-        base = start + step * done as f32;
-    }
-    let mut worst = 0.0f32;
-    for (k, &v) in tail.iter().enumerate() {
-        let d = (v - (base + step * k as f32)).abs();
-        worst = larger(worst, d);
-    }
-    for a in acc {
-        worst = larger(worst, a);
-    }
-    worst
 }

@@ -1,0 +1,389 @@
+//! Scanning a triangle's grid samples for the largest distance to its plane: the inner loop
+//! of both passes.
+//!
+//! The exact scan ([`scan_exact`], f64) is slow per sample; [`Scanner::scan`] does the same in
+//! f32 lanes ([`row_deviation`]) over row spans walked incrementally (no division per row),
+//! and only falls back on the exact scan when the f32 value lies so close to the bound that its
+//! rounding could put it on the wrong side. So every decision against the bound is the exact
+//! one; only the order in which triangles and ears are taken may differ in the last bits.
+
+use super::orient;
+use crate::adaptive::HeightGrid;
+use crate::adaptive::rows::{position_of, row_deviation};
+
+/// A triangle's largest distance from its plane and where it is (grid column, row).
+pub(super) type Worst = (f32, [u16; 2]);
+
+/// What a scan found against the bound.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Verdict {
+    /// Every sample is within the bound; the largest distance (approximate).
+    Within(f32),
+    /// Some sample is beyond it: the largest distance found (approximate) and where.
+    Beyond(Worst),
+}
+
+/// Scans triangles of one grid against one bound.
+pub(super) struct Scanner<'a> {
+    grid: &'a HeightGrid,
+    limit: f32,
+    /// How far an f32 distance may be from the exact one.
+    slack: f32,
+}
+
+impl<'a> Scanner<'a> {
+    pub(super) fn new(grid: &'a HeightGrid, limit: f32) -> Self {
+        let highest = grid.heights().iter().fold(1.0f32, |m, h| m.max(h.abs()));
+        Self {
+            grid,
+            limit,
+            // A plane value is a convex combination of corner heights (at most `highest`),
+            // formed from a rounded start and step times at most the side; a few ulps of twice
+            // the largest height bound the difference, 32 with room to spare.
+            slack: 32.0 * f32::EPSILON * highest,
+        }
+    }
+
+    /// Whether triangle `p` holds the bound, with its largest distance; with `stop_early`,
+    /// a triangle beyond the bound is given up as soon as one sample shows it (its worst
+    /// sample is then only the first found beyond).
+    pub(super) fn check(&self, p: [[u16; 2]; 3], stop_early: bool) -> Verdict {
+        let stop = if stop_early {
+            self.limit + self.slack
+        } else {
+            f32::INFINITY
+        };
+        let (worst, at) = scan_fast(self.grid, p, stop);
+        if worst > self.limit + self.slack {
+            return Verdict::Beyond((worst, at));
+        }
+        if worst <= self.limit - self.slack {
+            return Verdict::Within(worst);
+        }
+        let (exact, at) = scan_exact(self.grid, p);
+        if exact > self.limit {
+            Verdict::Beyond((exact, at))
+        } else {
+            Verdict::Within(exact)
+        }
+    }
+}
+
+/// One edge's bound on a row's samples, `a x + (b y + c) >= 0`, stepped row by row:
+/// `floor((b y + c) / |a|)` kept as quotient and remainder.
+#[derive(Clone, Copy)]
+struct EdgeWalk {
+    /// `|a|`, or 0 for a horizontal edge (then `quotient` is `b y + c` itself).
+    den: i64,
+    /// `a > 0`: the edge bounds x from below.
+    lower: bool,
+    quotient: i64,
+    remainder: i64,
+    step_quotient: i64,
+    step_remainder: i64,
+}
+
+impl EdgeWalk {
+    fn new(a: i64, b: i64, c: i64, y: i64) -> Self {
+        let rest = b * y + c;
+        if a == 0 {
+            return Self {
+                den: 0,
+                lower: false,
+                quotient: rest,
+                remainder: 0,
+                step_quotient: b,
+                step_remainder: 0,
+            };
+        }
+        let den = a.abs();
+        let (quotient, remainder) = floor_div(rest, den);
+        let (step_quotient, step_remainder) = floor_div(b, den);
+        Self {
+            den,
+            lower: a > 0,
+            quotient,
+            remainder,
+            step_quotient,
+            step_remainder,
+        }
+    }
+
+    /// Narrows `[lo, hi]` to the samples of this row on the inner side.
+    #[inline(always)]
+    fn clip(&self, lo: &mut i64, hi: &mut i64) {
+        if self.den == 0 {
+            if self.quotient < 0 {
+                *hi = *lo - 1;
+            }
+        } else if self.lower {
+            // a x >= -rest  <=>  x >= ceil(-rest / a) = -floor(rest / a).
+            *lo = (*lo).max(-self.quotient);
+        } else {
+            // |a| x <= rest  <=>  x <= floor(rest / |a|).
+            *hi = (*hi).min(self.quotient);
+        }
+    }
+
+    #[inline(always)]
+    fn next_row(&mut self) {
+        self.quotient += self.step_quotient;
+        if self.den != 0 {
+            self.remainder += self.step_remainder;
+            if self.remainder >= self.den {
+                self.remainder -= self.den;
+                self.quotient += 1;
+            }
+        }
+    }
+}
+
+/// `(floor(n / d), n - d floor(n / d))` for `d > 0`, with one division.
+#[inline(always)]
+fn floor_div(n: i64, d: i64) -> (i64, i64) {
+    let q = n / d;
+    let q = if n % d < 0 { q - 1 } else { q };
+    (q, n - q * d)
+}
+
+/// The rows of a triangle and the span of samples inside or on it in each, `(y, lo, hi)`
+/// (inclusive), top to bottom, skipping empty rows.
+struct Spans {
+    walks: [EdgeWalk; 3],
+    /// The edge functions themselves, for narrow triangles (`walks` unused).
+    direct: Option<EdgeFunctions>,
+    y: i64,
+    bottom: i64,
+    left: i64,
+    right: i64,
+}
+
+/// Triangles at most this many columns wide find their spans by testing every column (three
+/// additions each) rather than walking edges (divisions to set up).
+const DIRECT_WIDTH: i64 = 6;
+
+impl Spans {
+    fn new(p: [[u16; 2]; 3], w: &EdgeFunctions) -> Self {
+        let ys = p.map(|[_, y]| i64::from(y));
+        let xs = p.map(|[x, _]| i64::from(x));
+        let top = ys[0].min(ys[1]).min(ys[2]);
+        let (left, right) = (xs[0].min(xs[1]).min(xs[2]), xs[0].max(xs[1]).max(xs[2]));
+        let direct = right - left <= DIRECT_WIDTH;
+        let idle = EdgeWalk {
+            den: 0,
+            lower: false,
+            quotient: 0,
+            remainder: 0,
+            step_quotient: 0,
+            step_remainder: 0,
+        };
+        Self {
+            walks: if direct {
+                [idle; 3]
+            } else {
+                w.map(|(a, b, c)| EdgeWalk::new(a, b, c, top))
+            },
+            direct: direct.then_some(*w),
+            y: top,
+            bottom: ys[0].max(ys[1]).max(ys[2]),
+            left,
+            right,
+        }
+    }
+}
+
+impl Iterator for Spans {
+    type Item = (i64, i64, i64);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        while self.y <= self.bottom {
+            let y = self.y;
+            self.y += 1;
+            let (mut lo, mut hi) = (self.left, self.right);
+            if let Some(w) = &self.direct {
+                let inside = |x: i64| w.iter().all(|&(a, b, c)| a * x + b * y + c >= 0);
+                while lo <= hi && !inside(lo) {
+                    lo += 1;
+                }
+                while hi >= lo && !inside(hi) {
+                    hi -= 1;
+                }
+            } else {
+                for walk in &mut self.walks {
+                    walk.clip(&mut lo, &mut hi);
+                    walk.next_row();
+                }
+            }
+            if lo <= hi {
+                return Some((y, lo, hi));
+            }
+        }
+        None
+    }
+}
+
+/// `(a, b, c)` per edge: `a x + b y + c >= 0` on the inner side.
+type EdgeFunctions = [(i64, i64, i64); 3];
+
+/// The inner-side test of the three edges of `p`: `(a, b, c)` with `a x + b y + c >= 0` inside
+/// or on the edge opposite each vertex, twice the area, and its sign.
+fn edges(p: [[u16; 2]; 3]) -> Option<(EdgeFunctions, i64)> {
+    let area = orient(p[0], p[1], p[2]);
+    if area == 0 {
+        return None;
+    }
+    let s = area.signum();
+    let q = p.map(|[x, y]| [i64::from(x), i64::from(y)]);
+    let coeff = |i: usize, j: usize| {
+        let (a, b) = (q[i], q[j]);
+        let (ca, cb) = (-s * (b[1] - a[1]), s * (b[0] - a[0]));
+        (ca, cb, -(ca * a[0] + cb * a[1]))
+    };
+    Some(([coeff(1, 2), coeff(2, 0), coeff(0, 1)], area * s))
+}
+
+/// A proper triangle's edge functions, corner heights, `1 / (2 area)` and east slope.
+struct Plane {
+    w: EdgeFunctions,
+    z: [f64; 3],
+    inv: f64,
+    dz_dx: f64,
+}
+
+impl Plane {
+    fn new(grid: &HeightGrid, p: [[u16; 2]; 3]) -> Option<Self> {
+        let (w, area) = edges(p)?;
+        let z = p.map(|[x, y]| f64::from(grid.at(usize::from(x), usize::from(y))));
+        let inv = 1.0 / area as f64;
+        let dz_dx = (w[0].0 as f64 * z[0] + w[1].0 as f64 * z[1] + w[2].0 as f64 * z[2]) * inv;
+        Some(Self { w, z, inv, dz_dx })
+    }
+}
+
+/// Approximate (f32) largest distance of triangle `p`'s samples from its plane and where it
+/// is; stops at the first row whose largest distance exceeds `stop`.
+fn scan_fast(grid: &HeightGrid, p: [[u16; 2]; 3], stop: f32) -> Worst {
+    let Some(plane) = Plane::new(grid, p) else {
+        return (0.0, p[0]);
+    };
+    let Plane { w, z, dz_dx, .. } = plane;
+    let (side, h) = (grid.side(), grid.heights());
+    let dz_dy = (w[0].1 as f64 * z[0] + w[1].1 as f64 * z[1] + w[2].1 as f64 * z[2]) * plane.inv;
+    let [x0, y0] = p[0].map(i64::from);
+    let step = dz_dx as f32;
+    let mut best = (0.0f32, p[0]);
+    for (y, lo, hi) in Spans::new(p, &w) {
+        let start = (z[0] + dz_dx * (lo - x0) as f64 + dz_dy * (y - y0) as f64) as f32;
+        let base = y as usize * side;
+        let row = &h[base + lo as usize..=base + hi as usize];
+        let worst = row_deviation(row, start, step);
+        if worst > best.0 {
+            let k = position_of(row, start, step, worst);
+            best = (worst, [(lo + k as i64) as u16, y as u16]);
+            if worst > stop {
+                break;
+            }
+        }
+    }
+    best
+}
+
+/// The exact largest |height - plane| over the samples in triangle `p` (f64) and where it is.
+pub(super) fn scan_exact(grid: &HeightGrid, p: [[u16; 2]; 3]) -> Worst {
+    let Some(Plane { w, z, inv, dz_dx }) = Plane::new(grid, p) else {
+        return (0.0, p[0]);
+    };
+    let (side, h) = (grid.side(), grid.heights());
+    let mut best = (0.0f32, p[0]);
+    for (y, lo, hi) in Spans::new(p, &w) {
+        let wl: f64 = w
+            .iter()
+            .zip(&z)
+            .map(|(&(a, b, c), &zk)| (a * lo + b * y + c) as f64 * zk)
+            .sum();
+        let start = wl * inv;
+        let row = &h[y as usize * side + lo as usize..=y as usize * side + hi as usize];
+        for (k, &v) in row.iter().enumerate() {
+            let d = (f64::from(v) - (start + dz_dx * k as f64)).abs() as f32;
+            if d > best.0 {
+                best = (d, [(lo + k as i64) as u16, y as u16]);
+            }
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::adaptive::test_grids::rough;
+    use proptest::prelude::*;
+
+    /// Every sample inside or on triangle `p`, by the edge functions at each sample.
+    fn brute(grid: &HeightGrid, p: [[u16; 2]; 3]) -> (f32, usize) {
+        let Some((w, area)) = edges(p) else {
+            return (0.0, 0);
+        };
+        let z = p.map(|[x, y]| f64::from(grid.at(usize::from(x), usize::from(y))));
+        let (mut worst, mut count) = (0.0f32, 0);
+        for y in 0..grid.side() as i64 {
+            for x in 0..grid.side() as i64 {
+                let e = w.map(|(a, b, c)| a * x + b * y + c);
+                if e.iter().all(|&e| e >= 0) {
+                    count += 1;
+                    let plane = (0..3).map(|k| e[k] as f64 * z[k]).sum::<f64>() / area as f64;
+                    let d = (f64::from(grid.at(x as usize, y as usize)) - plane).abs() as f32;
+                    worst = worst.max(d);
+                }
+            }
+        }
+        (worst, count)
+    }
+
+    /// The distance at sample `at` from the plane of `p`.
+    fn distance_at(grid: &HeightGrid, p: [[u16; 2]; 3], at: [u16; 2]) -> f32 {
+        let (w, area) = edges(p).expect("a proper triangle");
+        let z = p.map(|[x, y]| f64::from(grid.at(usize::from(x), usize::from(y))));
+        let [x, y] = at.map(i64::from);
+        let plane = (0..3)
+            .map(|k| (w[k].0 * x + w[k].1 * y + w[k].2) as f64 * z[k])
+            .sum::<f64>()
+            / area as f64;
+        (f64::from(grid.at(x as usize, y as usize)) - plane).abs() as f32
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        #[test]
+        fn scans_see_exactly_the_samples_inside_and_agree_on_the_bound(
+            seed in any::<u32>(),
+            c in prop::array::uniform6(0u16..=32),
+            limit in 0.0f32..40.0,
+        ) {
+            let grid = rough(33, seed, 300.0);
+            let p = [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]]];
+            let (truth, inside) = brute(&grid, p);
+            let spanned: i64 = edges(p)
+                .map_or(0, |(w, _)| Spans::new(p, &w).map(|(_, lo, hi)| hi - lo + 1).sum());
+            prop_assert_eq!(spanned as usize, inside);
+            let (exact, at) = scan_exact(&grid, p);
+            prop_assert!((exact - truth).abs() <= 1e-4, "{exact} vs {truth}");
+            if exact > 0.0 {
+                prop_assert_eq!(distance_at(&grid, p, at), exact);
+            }
+            let (fast, _) = scan_fast(&grid, p, f32::INFINITY);
+            let scanner = Scanner::new(&grid, limit);
+            prop_assert!((fast - exact).abs() <= scanner.slack, "{fast} vs {exact}");
+            for stop_early in [false, true] {
+                match scanner.check(p, stop_early) {
+                    Verdict::Within(_) => prop_assert!(exact <= limit),
+                    Verdict::Beyond((e, _)) => {
+                        prop_assert!(exact > limit);
+                        prop_assert!(e > limit);
+                    }
+                }
+            }
+        }
+    }
+}
