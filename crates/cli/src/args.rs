@@ -125,6 +125,11 @@ pub struct GlobeArgs {
     /// corridor-height). Repeatable.
     #[arg(long = "vector")]
     pub vector: Vec<String>,
+    /// City lights on the night side: an equirectangular image of the whole planet twice as
+    /// wide as tall (JPEG or PNG, e.g. ../shared/data/earth-night-4096x2048.jpg), drawn where
+    /// the Sun is down (see --time); images wider than 8192 are scaled down.
+    #[arg(long = "night-imagery")]
+    pub night_imagery: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -397,6 +402,25 @@ pub fn vector_layer(
 
 /// The globe the arguments (and their config file) describe. Checks every value the
 /// command line adds; the engine checks the rest when the globe is built.
+/// Reads `--night-imagery`: an equirectangular image, scaled down to at most
+/// [`NightLights::MAX_WIDTH`] wide.
+fn night_lights(path: &std::path::Path) -> anyhow::Result<globus_engine::NightLights> {
+    let image = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| anyhow::anyhow!("--night-imagery {}: {e}", path.display()))?
+        .decode()
+        .map_err(|e| anyhow::anyhow!("--night-imagery {}: {e}", path.display()))?;
+    let max = globus_engine::NightLights::MAX_WIDTH;
+    let image = if image.width() > max && image.width() == 2 * image.height() {
+        image.resize_exact(max, max / 2, image::imageops::FilterType::Triangle)
+    } else {
+        image
+    };
+    let rgb = image.to_rgb8();
+    globus_engine::NightLights::from_rgb(rgb.width(), rgb.height(), rgb.as_raw())
+        .map_err(|e| anyhow::anyhow!("--night-imagery {}: {e}", path.display()))
+}
+
 pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     let mut builder = GlobeBuilder::new();
     let mut caches_sized = false;
@@ -467,6 +491,9 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     }
     for t in &a.terrain {
         builder.terrain(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--terrain: {e}"))?);
+    }
+    if let Some(path) = &a.night_imagery {
+        builder.night_lights(Some(std::sync::Arc::new(night_lights(path)?)));
     }
     for t in &a.imagery {
         builder.imagery(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?);

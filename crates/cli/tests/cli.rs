@@ -212,6 +212,32 @@ fn bad_arguments_end_with_one_clear_line() {
             .collect();
         fails_with_one_line(&args, &[needle]);
     }
+    // Night lights: a missing file and an image that is not equirectangular, each named.
+    let night = std::env::temp_dir().join("globus-cli-night-3x2.png");
+    image::RgbImage::new(3, 2)
+        .save(&night)
+        .expect("write a PNG");
+    let night = night.to_str().unwrap();
+    for (file, needle) in [
+        ("/nonexistent/night.jpg", "/nonexistent/night.jpg"),
+        (night, "twice as wide as tall"),
+        (night, "globus-cli-night-3x2.png"),
+    ] {
+        fails_with_one_line(
+            &[
+                "render",
+                "--camera",
+                "0,0,1000,0,0",
+                "--size",
+                "64x64",
+                "--out",
+                png,
+                "--night-imagery",
+                file,
+            ],
+            &[needle],
+        );
+    }
 }
 
 /// A camera path file of these keyframes (JSON objects, comma-separated) in a scratch file.

@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use globus_geo::Ellipsoid;
-use globus_render::{GpuContext, TilePoolOptions};
+use globus_render::{GpuContext, NightLights, TilePoolOptions};
 use globus_stream::decode::DecodeLimits;
 use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
 use globus_stream::open::{
@@ -71,6 +71,7 @@ pub struct GlobeBuilder {
     ellipsoid: Ellipsoid,
     viewport: Option<(u32, u32)>,
     source: Option<Arc<dyn TerrainSource>>,
+    night_lights: Option<Arc<NightLights>>,
 }
 
 impl Default for GlobeBuilder {
@@ -97,6 +98,7 @@ impl Default for GlobeBuilder {
             ellipsoid: Ellipsoid::WGS84,
             viewport: None,
             source: None,
+            night_lights: None,
         }
     }
 }
@@ -190,6 +192,18 @@ impl GlobeBuilder {
     pub fn reserve_memory(&mut self, bytes: u64) -> &mut Self {
         self.reserved_bytes = bytes;
         self
+    }
+
+    /// City lights drawn where the Sun is down (see [`NightLights`]); a memory budget counts
+    /// their texture ([`NightLights::gpu_bytes`]). `None` (the default): no lights.
+    pub fn night_lights(&mut self, lights: Option<Arc<NightLights>>) -> &mut Self {
+        self.night_lights = lights;
+        self
+    }
+
+    /// The night lights, if set.
+    pub(crate) fn night_lights_ref(&self) -> Option<&NightLights> {
+        self.night_lights.as_deref()
     }
 
     /// Tile loader threads.

@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
 use globus_render::{
     DrawStats, FrameCamera, FrameFormats, FrameInputs, FrameTargets, GlobeRenderer, Lighting,
-    NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, PoolStats, TilePool, near_plane_m,
+    NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, NightLights, PoolStats, TilePool, near_plane_m,
 };
 use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
 use globus_tiling::quality::QualityLoop;
@@ -190,6 +190,7 @@ impl Globe {
                 resident_bytes().map(|r| {
                     r + frame_bytes
                         + settings.reserved_bytes
+                        + builder.night_lights_ref().map_or(0, NightLights::gpu_bytes)
                         + if software {
                             SOFTWARE_RASTER_BYTES + total / SOFTWARE_TRIANGLE_SHARE
                         } else {
@@ -229,7 +230,11 @@ impl Globe {
             device: device.clone(),
             queue: queue.clone(),
             layer,
-            renderer: GlobeRenderer::new(device, formats, pool),
+            renderer: {
+                let mut renderer = GlobeRenderer::new(device, formats, pool);
+                renderer.set_night_lights(device, queue, builder.night_lights_ref());
+                renderer
+            },
             formats,
             targets,
             selection_options,
@@ -497,6 +502,10 @@ impl Globe {
                 eye_height_m: eye.height_m,
                 eye_up: ellipsoid.geodetic_normal_from_lon_lat(eye.lon_rad, eye.lat_rad),
                 planet_radius_m: ellipsoid.mean_radius(),
+                eccentricity_squared: {
+                    let r = ellipsoid.radii();
+                    1.0 - (r.z * r.z) / (r.x * r.x)
+                },
                 lighting,
                 tiles: &tiles,
             },

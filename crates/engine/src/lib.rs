@@ -86,7 +86,8 @@ pub use vector::{FeatureId, VectorLayer, VectorStats};
 
 pub use globus_geo::{Cartographic, DQuat, DVec2, DVec3, Ellipsoid, Projection, View};
 pub use globus_render::{
-    DrawStats, FrameCamera, FrameFormats, GpuContext, Lighting, PoolStats, RgbaImage,
+    DrawStats, FrameCamera, FrameFormats, GpuContext, Lighting, NightLights, NightLightsError,
+    PoolStats, RgbaImage,
 };
 pub use globus_stream::open::SourceSpec;
 pub use globus_stream::{LayerStats, SchedulerStats, TerrainLayer, TerrainSource};

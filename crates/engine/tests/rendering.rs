@@ -467,3 +467,105 @@ fn the_sun_at_a_moment_lights_the_day_side_and_leaves_the_night_side_dark() {
     );
     assert!(el > 3.0 * er, "18:00: left {el:.0}, right {er:.0}");
 }
+
+/// City lights from an equirectangular image: lit where the image is bright and the Sun is
+/// down, exactly where the image puts them, and nowhere by day.
+#[test]
+fn night_lights_shine_where_their_image_puts_them_and_only_at_night() {
+    use globus_engine::{Cartographic, FrameCamera, Lighting, NightLights};
+    // 1024 x 512: a bright box over 0..20 E, 40..60 N, black elsewhere.
+    let (iw, ih) = (1024u32, 512u32);
+    let data = (0..ih)
+        .flat_map(|y| {
+            (0..iw).map(move |x| {
+                let lon = (f64::from(x) + 0.5) / f64::from(iw) * 360.0 - 180.0;
+                let lat = 90.0 - (f64::from(y) + 0.5) / f64::from(ih) * 180.0;
+                if (0.0..20.0).contains(&lon) && (40.0..60.0).contains(&lat) {
+                    255
+                } else {
+                    0
+                }
+            })
+        })
+        .collect();
+    let lights = NightLights::from_luminance(iw, ih, data).expect("a 2:1 image");
+    let (w, h) = (240u32, 240u32);
+    let mut lit_builder = GlobeBuilder::new();
+    lit_builder.night_lights(Some(std::sync::Arc::new(lights)));
+    let mut lit = Headless::new(&lit_builder, w, h).expect("a GPU or lavapipe");
+    let mut plain = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let view = camera(10.0, 50.0, 3_000_000.0, 0.0, -90.0, false).view(lit.globe(), 60.0, w, h);
+    let dir = globus_test_support::output_dir("rendering");
+    let shot = |off: &mut Headless, name: &str, sun: Lighting| {
+        off.globe_mut().set_lighting(Some(sun));
+        let frame = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
+        assert!(frame.complete, "{name}: tiles still loading");
+        save_png(&frame.image, &dir.join(format!("night_{name}.png"))).expect("save");
+        frame.image
+    };
+    // The Sun over the antimeridian (the whole view is in night), then over the view.
+    let night = Lighting::sun_over(std::f64::consts::PI, 0.0);
+    let day = Lighting::sun_over(10f64.to_radians(), 50f64.to_radians());
+    let (lit_night, plain_night) = (
+        shot(&mut lit, "lit", night),
+        shot(&mut plain, "plain", night),
+    );
+    let (lit_day, plain_day) = (
+        shot(&mut lit, "lit_day", day),
+        shot(&mut plain, "plain_day", day),
+    );
+    let camera = FrameCamera::new(&view, 1.0);
+    // Mean channel sum of the 5 x 5 pixels around where (lon, lat) is drawn.
+    let at = |img: &RgbaImage, lon: f64, lat: f64| {
+        let ground = Ellipsoid::WGS84.cartographic_to_ecef(Cartographic::new(
+            f64::to_radians(lon),
+            f64::to_radians(lat),
+            0.0,
+        ));
+        let (px, _) = camera
+            .project_with_depth(ground)
+            .expect("in front of the camera");
+        let (cx, cy) = (px.x as u32, px.y as u32);
+        let mut sum = 0.0;
+        for y in cy - 2..=cy + 2 {
+            for x in cx - 2..=cx + 2 {
+                assert!(covered(img, x, y), "({lon}, {lat}) is not on the planet");
+                let p = img.get(x, y);
+                sum += f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+            }
+        }
+        sum / 25.0
+    };
+    // Inside the box, 2 degrees in from each edge: lit. Outside, 2 degrees out: as without.
+    for (lon, lat) in [
+        (10.0, 50.0),
+        (2.0, 50.0),
+        (18.0, 50.0),
+        (10.0, 42.0),
+        (10.0, 58.0),
+    ] {
+        let (l, p) = (at(&lit_night, lon, lat), at(&plain_night, lon, lat));
+        assert!(
+            l > p + 150.0,
+            "night at ({lon}, {lat}): lit {l:.0}, plain {p:.0}"
+        );
+    }
+    for (lon, lat) in [
+        (-2.0, 50.0),
+        (22.0, 50.0),
+        (10.0, 38.0),
+        (10.0, 62.0),
+        (25.0, 45.0),
+    ] {
+        let (l, p) = (at(&lit_night, lon, lat), at(&plain_night, lon, lat));
+        assert!(
+            (l - p).abs() <= 6.0,
+            "night at ({lon}, {lat}): lit {l:.0}, plain {p:.0}"
+        );
+    }
+    // By day the lights are off.
+    let (l, p) = (at(&lit_day, 10.0, 50.0), at(&plain_day, 10.0, 50.0));
+    assert!((l - p).abs() <= 3.0, "day: lit {l:.0}, plain {p:.0}");
+}

@@ -19,6 +19,7 @@ use globus_terrain::TerrainVertex;
 use globus_tiling::TileKey;
 
 use crate::camera::FrameCamera;
+use crate::night::NightLights;
 use crate::pool::TilePool;
 use crate::shaders;
 use crate::target::{DEPTH_FORMAT, FrameFormats};
@@ -33,6 +34,8 @@ struct FrameUniforms {
     sun: [f32; 4],
     planet: [f32; 4],
     viewport: [f32; 4],
+    eye_position: [f32; 4],
+    night: [f32; 4],
 }
 
 /// One indirect draw (the layout `multi_draw_indexed_indirect` reads).
@@ -95,6 +98,8 @@ pub struct FrameInputs<'a> {
     pub eye_up: DVec3,
     /// Mean radius of the planet, metres.
     pub planet_radius_m: f64,
+    /// The planet's first eccentricity squared (for geodetic latitudes on the GPU).
+    pub eccentricity_squared: f64,
     /// Sun and air.
     pub lighting: Lighting,
     /// Tiles to draw; each must be resident in the pool (others are skipped and counted).
@@ -138,6 +143,11 @@ pub struct GlobeRenderer {
     sampler: wgpu::Sampler,
     pool: TilePool,
     stats: DrawStats,
+    /// The night lights' texture (1 x 1 black without them), its sampler, and its width in
+    /// texels (0 without).
+    night_view: wgpu::TextureView,
+    night_sampler: wgpu::Sampler,
+    night_width: u32,
 }
 
 impl GlobeRenderer {
@@ -198,6 +208,15 @@ impl GlobeRenderer {
         });
         let indirect_capacity = 256;
         let indirect_buffer = indirect_buffer(device, indirect_capacity);
+        let night_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("night lights"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
         Self {
             frame_buffer,
             frame_bind_group,
@@ -215,7 +234,32 @@ impl GlobeRenderer {
             sampler,
             pool,
             stats: DrawStats::default(),
+            night_view: night_texture(device, None),
+            night_sampler,
+            night_width: 0,
         }
+    }
+
+    /// Draws `lights` on the night side from the next frame (`None`: none). The texture
+    /// takes [`NightLights::gpu_bytes`] of GPU memory.
+    pub fn set_night_lights(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        lights: Option<&NightLights>,
+    ) {
+        self.night_view = match lights {
+            Some(l) => {
+                let view = night_texture(device, Some((queue, l)));
+                self.night_width = l.width();
+                view
+            }
+            None => {
+                self.night_width = 0;
+                night_texture(device, None)
+            }
+        };
+        self.terrain_bind_group = None;
     }
 
     /// CPU phase: uniforms and instances for this frame.
@@ -247,6 +291,16 @@ impl GlobeRenderer {
                 view.height_px as f32,
                 1.0 / view.width_px.max(1) as f32,
                 1.0 / view.height_px.max(1) as f32,
+            ],
+            eye_position: {
+                let eye = view.position.as_vec3();
+                [eye.x, eye.y, eye.z, inputs.eccentricity_squared as f32]
+            },
+            night: [
+                if self.night_width > 0 { 1.0 } else { 0.0 },
+                self.night_width as f32,
+                (1.0 / camera.pixels_per_metre(1.0)) as f32,
+                0.0,
             ],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));
@@ -381,9 +435,66 @@ impl GlobeRenderer {
                     binding: 3,
                     resource: self.colour_map_buffer.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&self.night_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::Sampler(&self.night_sampler),
+                },
             ],
         })
     }
+}
+
+/// The night lights' texture with its mips (R8), or a 1 x 1 black one.
+fn night_texture(
+    device: &wgpu::Device,
+    lights: Option<(&wgpu::Queue, &NightLights)>,
+) -> wgpu::TextureView {
+    let (width, height, mips) = match lights {
+        Some((_, l)) => (l.width(), l.height(), l.levels().len() as u32),
+        None => (1, 1, 1),
+    };
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("night lights"),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: mips,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::R8Unorm,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    if let Some((queue, l)) = lights {
+        for (level, (w, h, data)) in l.levels().iter().enumerate() {
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: level as u32,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                data,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(*w),
+                    rows_per_image: Some(*h),
+                },
+                wgpu::Extent3d {
+                    width: *w,
+                    height: *h,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+    }
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
 }
 
 fn indirect_buffer(device: &wgpu::Device, capacity: u32) -> wgpu::Buffer {
@@ -431,6 +542,22 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
                 count: None,
             },
             per_slot_storage(3),
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 5,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
         ],
     })
 }

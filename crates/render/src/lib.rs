@@ -12,6 +12,7 @@
 //!   id and depth buffers). Positions are f32 offsets from each tile's centre plus a
 //!   centre-to-eye offset computed in f64 every frame (camera-relative rendering), and depth
 //!   is reversed-Z with an infinite far plane in a 32-bit float buffer.
+//! * [`NightLights`]: city lights on the night side, from an equirectangular image.
 //! * [`FrameCamera`]: the frame's camera-relative origin (f64), matrices, near plane and
 //!   viewport, and the projection of f64 world points to pixels.
 //! * [`FrameTargets`]: the depth buffer and the id buffer (Kaiser's item buffer, for picking)
@@ -21,6 +22,7 @@
 mod camera;
 mod context;
 mod globe;
+mod night;
 mod pool;
 mod ranges;
 pub mod shaders;
@@ -29,6 +31,7 @@ mod target;
 pub use camera::{FrameCamera, NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, near_plane_m};
 pub use context::{GpuContext, RenderError};
 pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting};
+pub use night::{NightLights, NightLightsError};
 pub use pool::{
     ColourSource, MAX_TILE_INDICES, MAX_TILE_VERTICES, PoolStats, Residency, Resident, TilePool,
     TilePoolOptions,

@@ -14,6 +14,12 @@ struct Frame {
     planet: vec4<f32>,
     // x, y: viewport size in pixels; z, w: 1 / size.
     viewport: vec4<f32>,
+    // xyz: the eye, ECEF metres (f32: for directions and texture lookups only); w: the
+    // planet's first eccentricity squared.
+    eye_position: vec4<f32>,
+    // x: night lights gain (0: none); y: their texture's width in texels; z: metres a pixel
+    // spans 1 m in front of the eye (an orthographic camera: at any distance).
+    night: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;

@@ -23,6 +23,44 @@ struct VsIn {
 @group(1) @binding(2) var colour_sampler: sampler;
 // Per slot: uv scale (u, v), uv offset (u, v): the tile's part of its colour layer.
 @group(1) @binding(3) var<storage, read> colour_maps: array<vec4<f32>>;
+// City lights: luminance, equirectangular (u east from 180 W, v south from the north pole).
+@group(1) @binding(4) var night_lights: texture_2d<f32>;
+@group(1) @binding(5) var night_sampler: sampler;
+
+const PI: f32 = 3.14159265;
+// Sodium-lamp orange of city lights, and their brightness before tone mapping.
+const LIGHT_COLOUR: vec3<f32> = vec3<f32>(1.0, 0.72, 0.38);
+const LIGHT_GAIN: f32 = 2.5;
+const LIGHT_FLOOR: f32 = 0.04;
+
+// The city lights at a ground point `eye_offset` from the eye, `dist` away, weighted by how
+// far the Sun is below its horizon there (none by day, all once it is 6 degrees down).
+fn night_light(eye_offset: vec3<f32>, dist: f32) -> vec3<f32> {
+    if (frame.night.x <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let p = frame.eye_position.xyz + eye_offset;
+    let up = normalize(p);
+    let dark = 1.0 - smoothstep(-0.105, 0.02, dot(up, frame.sun.xyz));
+    if (dark <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let lon = atan2(p.y, p.x);
+    // Geodetic latitude of a point on the ellipsoid's surface.
+    let lat = atan2(p.z, (1.0 - frame.eye_position.w) * length(p.xy));
+    let uv = vec2<f32>(lon / (2.0 * PI) + 0.5, 0.5 - lat / PI);
+    // Mip level from the ground one pixel spans against a texel's (the longitude seam would
+    // break the derivatives of an automatic choice).
+    var metres_per_px = frame.night.z * dist;
+    if (is_ortho()) {
+        metres_per_px = frame.night.z;
+    }
+    let texel_m = 2.0 * PI * frame.planet.x / frame.night.y;
+    let level = max(log2(max(metres_per_px / texel_m, 1e-6)), 0.0);
+    let lum = textureSampleLevel(night_lights, night_sampler, uv, level).r;
+    // Less a floor: the images' faint background (JPEG noise, airglow) stays dark.
+    return LIGHT_COLOUR * (max(lum - LIGHT_FLOOR, 0.0) * LIGHT_GAIN * dark * frame.night.x);
+}
 
 struct VsOut {
     @builtin(position) clip: vec4<f32>,
@@ -63,7 +101,8 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     // Sun glint on water (Blinn-Phong).
     let h = normalize(sun + view);
     let glint = water * pow(max(dot(n, h), 0.0), 200.0) * 0.35 * step(0.0, dot(n, sun));
-    var colour = albedo * (ambient + (1.0 - ambient) * diffuse) + vec3<f32>(glint);
+    var colour = albedo * (ambient + (1.0 - ambient) * diffuse) + vec3<f32>(glint)
+        + night_light(in.eye_offset, dist);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
     var haze: Air;
     if (is_ortho()) {
