@@ -233,6 +233,7 @@ impl Globe {
             renderer: {
                 let mut renderer = GlobeRenderer::new(device, formats, pool);
                 renderer.set_night_lights(device, queue, builder.night_lights_ref());
+                renderer.set_procedural_lights(!builder.uses_real_data());
                 renderer
             },
             formats,
@@ -337,6 +338,12 @@ impl Globe {
     /// [`Globe::default_lighting`]).
     pub fn set_lighting(&mut self, lighting: Option<Lighting>) {
         self.lighting = lighting;
+    }
+
+    /// Whether the procedural planet's towns light its night side (on by default for the
+    /// procedural planet, off with real data; night lights from an image replace them).
+    pub fn set_procedural_lights(&mut self, on: bool) {
+        self.renderer.set_procedural_lights(on);
     }
 
     /// Whether the error bound may come back down after budgets forced it up (on by

@@ -569,3 +569,51 @@ fn night_lights_shine_where_their_image_puts_them_and_only_at_night() {
     let (l, p) = (at(&lit_day, 10.0, 50.0), at(&plain_day, 10.0, 50.0));
     assert!((l - p).abs() <= 3.0, "day: lit {l:.0}, plain {p:.0}");
 }
+
+/// The procedural planet's towns light its night side (points from orbit), and nothing by day.
+#[test]
+fn the_procedural_planet_has_town_lights_at_night_only() {
+    use globus_engine::Lighting;
+    let (w, h) = (240u32, 240u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let view = camera(10.0, 48.0, 3_000_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let dir = globus_test_support::output_dir("rendering");
+    let mut shot = |name: &str, sun: Lighting, lights: bool| {
+        let globe = off.globe_mut();
+        globe.set_lighting(Some(sun));
+        globe.set_procedural_lights(lights);
+        let frame = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
+        assert!(frame.complete, "{name}: tiles still loading");
+        save_png(&frame.image, &dir.join(format!("towns_{name}.png"))).expect("save");
+        frame.image
+    };
+    let night = Lighting::sun_over(std::f64::consts::PI, 0.0);
+    let day = Lighting::sun_over(10f64.to_radians(), 48f64.to_radians());
+    let (lit, dark) = (shot("night", night, true), shot("night_off", night, false));
+    let (lit_day, plain_day) = (shot("day", day, true), shot("day_off", day, false));
+    // Pixels whose channel sum the towns raise by more than 30, and by how much at most.
+    let raised = |a: &RgbaImage, b: &RgbaImage| {
+        let mut n = 0;
+        let mut most = 0i32;
+        for (p, q) in a.pixels.chunks_exact(4).zip(b.pixels.chunks_exact(4)) {
+            let d: i32 = (0..3).map(|k| i32::from(p[k]) - i32::from(q[k])).sum();
+            n += usize::from(d > 30);
+            most = most.max(d.abs());
+        }
+        (n, most)
+    };
+    let (towns, brightest) = raised(&lit, &dark);
+    // Scattered points: some, but not a glow over the whole disc (57,600 pixels).
+    assert!(
+        (40..6_000).contains(&towns),
+        "{towns} pixels lit by towns (brightest +{brightest})"
+    );
+    assert!(brightest > 150, "the brightest town adds only {brightest}");
+    let (by_day, most_by_day) = raised(&lit_day, &plain_day);
+    assert!(
+        by_day == 0 && most_by_day <= 3,
+        "by day: {by_day} pixels, up to {most_by_day}"
+    );
+}

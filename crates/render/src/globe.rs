@@ -148,6 +148,8 @@ pub struct GlobeRenderer {
     night_view: wgpu::TextureView,
     night_sampler: wgpu::Sampler,
     night_width: u32,
+    /// Whether to draw procedural towns at night where there is no night lights image.
+    procedural_lights: bool,
 }
 
 impl GlobeRenderer {
@@ -237,7 +239,14 @@ impl GlobeRenderer {
             night_view: night_texture(device, None),
             night_sampler,
             night_width: 0,
+            procedural_lights: false,
         }
+    }
+
+    /// Draws procedural towns on the night side's land (for a procedural planet), unless
+    /// night lights are set ([`GlobeRenderer::set_night_lights`]).
+    pub fn set_procedural_lights(&mut self, on: bool) {
+        self.procedural_lights = on;
     }
 
     /// Draws `lights` on the night side from the next frame (`None`: none). The texture
@@ -300,7 +309,7 @@ impl GlobeRenderer {
                 if self.night_width > 0 { 1.0 } else { 0.0 },
                 self.night_width as f32,
                 (1.0 / camera.pixels_per_metre(1.0)) as f32,
-                0.0,
+                if self.procedural_lights { 1.0 } else { 0.0 },
             ],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));

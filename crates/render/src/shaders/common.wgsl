@@ -18,7 +18,8 @@ struct Frame {
     // planet's first eccentricity squared.
     eye_position: vec4<f32>,
     // x: night lights gain (0: none); y: their texture's width in texels; z: metres a pixel
-    // spans 1 m in front of the eye (an orthographic camera: at any distance).
+    // spans 1 m in front of the eye (an orthographic camera: at any distance); w: procedural
+    // towns' gain (0: none; only without an image).
     night: vec4<f32>,
 }
 

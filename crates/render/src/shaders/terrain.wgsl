@@ -33,10 +33,77 @@ const LIGHT_COLOUR: vec3<f32> = vec3<f32>(1.0, 0.72, 0.38);
 const LIGHT_GAIN: f32 = 2.5;
 const LIGHT_FLOOR: f32 = 0.04;
 
+// A 32-bit hash of a lattice cell (integer mixing, the same on every GPU).
+fn hash_cell(c: vec3<i32>) -> u32 {
+    var h = (u32(c.x) * 0x8da6b343u) ^ (u32(c.y) * 0xd8163841u) ^ (u32(c.z) * 0xcb1ab31fu);
+    h = (h ^ (h >> 16u)) * 0x7feb352du;
+    h = (h ^ (h >> 15u)) * 0x846ca68bu;
+    return h ^ (h >> 16u);
+}
+
+// 0..1 from the top 24 bits of a hash.
+fn unit_of(h: u32) -> f32 {
+    return f32(h >> 8u) / 16777216.0;
+}
+
+// Trilinear value noise over a unit lattice, 0..1.
+fn value_noise(x: vec3<f32>) -> f32 {
+    let c = floor(x);
+    let f = x - c;
+    let w = f * f * (3.0 - 2.0 * f);
+    let i = vec3<i32>(c);
+    var n = 0.0;
+    for (var k = 0; k < 8; k = k + 1) {
+        let o = vec3<i32>(k & 1, (k >> 1) & 1, (k >> 2) & 1);
+        let corner = vec3<f32>(o);
+        let weight = mix(1.0 - w.x, w.x, corner.x) * mix(1.0 - w.y, w.y, corner.y) * mix(1.0 - w.z, w.z, corner.z);
+        n = n + weight * unit_of(hash_cell(i + o));
+    }
+    return n;
+}
+
+// Size of a town cell, metres: each holds at most one town, a ball about a point inside it
+// that the ground cuts into a bright disc.
+const TOWN_CELL_M: f32 = 30000.0;
+
+// Procedural towns for the procedural planet, at ground point `p` (ECEF, metres): a town in a
+// cell where a continental-scale noise says people live; seen from far enough that a cell is
+// a few pixels, their mean glow instead (no sparkle).
+fn procedural_lights(p: vec3<f32>, metres_per_px: f32) -> f32 {
+    let settled = smoothstep(0.5, 0.8, value_noise(p / 900000.0));
+    if (settled <= 0.0) {
+        return 0.0;
+    }
+    let q = p / TOWN_CELL_M;
+    let c = floor(q);
+    let h = hash_cell(vec3<i32>(c));
+    var town = 0.0;
+    if (unit_of(h) < 0.7 * settled) {
+        let h2 = hash_cell(vec3<i32>(c) + vec3<i32>(101, 0, 0));
+        let h3 = hash_cell(vec3<i32>(c) + vec3<i32>(0, 101, 0));
+        let h4 = hash_cell(vec3<i32>(c) + vec3<i32>(0, 0, 101));
+        let radius = 0.05 + 0.2 * unit_of(h2 ^ h3);
+        let centre = c + vec3<f32>(0.35, 0.35, 0.35) + 0.3 * vec3<f32>(unit_of(h2), unit_of(h3), unit_of(h4));
+        // A town smaller than a pixel is drawn a pixel wide with the same light in all, so
+        // it neither sparkles nor vanishes (at most 0.35 of a cell: it stays in its cell).
+        let drawn = max(radius, 0.7 * metres_per_px / TOWN_CELL_M);
+        let d = length(q - centre) / drawn;
+        let spread = radius / drawn;
+        town = max(1.0 - d * d, 0.0) * (0.6 + 0.8 * unit_of(h4 ^ h2)) * spread * spread;
+    }
+    // The mean over cells, once a cell is under two pixels: present 0.7 settled, the ball's
+    // volume (4/3) pi E[r^3] ~ 0.013 (a random plane cuts it), profile mean 0.4, brightness
+    // mean 1.
+    let mean = 0.7 * settled * 0.013 * 0.4;
+    let near = clamp(TOWN_CELL_M / metres_per_px - 1.0, 0.0, 1.0);
+    return mix(mean, town, near);
+}
+
 // The city lights at a ground point `eye_offset` from the eye, `dist` away, weighted by how
-// far the Sun is below its horizon there (none by day, all once it is 6 degrees down).
-fn night_light(eye_offset: vec3<f32>, dist: f32) -> vec3<f32> {
-    if (frame.night.x <= 0.0) {
+// far the Sun is below its horizon there (none by day, all once it is 6 degrees down); the
+// procedural planet's towns only on land (`land` 1).
+fn night_light(eye_offset: vec3<f32>, dist: f32, land: f32) -> vec3<f32> {
+    if (frame.night.x <= 0.0 && frame.night.w <= 0.0) {
         return vec3<f32>(0.0);
     }
     let p = frame.eye_position.xyz + eye_offset;
@@ -45,16 +112,19 @@ fn night_light(eye_offset: vec3<f32>, dist: f32) -> vec3<f32> {
     if (dark <= 0.0) {
         return vec3<f32>(0.0);
     }
+    var metres_per_px = frame.night.z * dist;
+    if (is_ortho()) {
+        metres_per_px = frame.night.z;
+    }
+    if (frame.night.x <= 0.0) {
+        return LIGHT_COLOUR * (procedural_lights(p, metres_per_px) * land * LIGHT_GAIN * dark * frame.night.w);
+    }
     let lon = atan2(p.y, p.x);
     // Geodetic latitude of a point on the ellipsoid's surface.
     let lat = atan2(p.z, (1.0 - frame.eye_position.w) * length(p.xy));
     let uv = vec2<f32>(lon / (2.0 * PI) + 0.5, 0.5 - lat / PI);
     // Mip level from the ground one pixel spans against a texel's (the longitude seam would
     // break the derivatives of an automatic choice).
-    var metres_per_px = frame.night.z * dist;
-    if (is_ortho()) {
-        metres_per_px = frame.night.z;
-    }
     let texel_m = 2.0 * PI * frame.planet.x / frame.night.y;
     let level = max(log2(max(metres_per_px / texel_m, 1e-6)), 0.0);
     let lum = textureSampleLevel(night_lights, night_sampler, uv, level).r;
@@ -102,7 +172,7 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let h = normalize(sun + view);
     let glint = water * pow(max(dot(n, h), 0.0), 200.0) * 0.35 * step(0.0, dot(n, sun));
     var colour = albedo * (ambient + (1.0 - ambient) * diffuse) + vec3<f32>(glint)
-        + night_light(in.eye_offset, dist);
+        + night_light(in.eye_offset, dist, texel.a);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
     var haze: Air;
     if (is_ortho()) {
