@@ -205,8 +205,13 @@ pub struct TrafficSceneArgs {
 #[derive(Args)]
 pub struct BenchArgs {
     /// Camera path JSON (see paths/alps-dive.json).
-    #[arg(long, conflicts_with_all = ["from", "to", "soak", "traffic"], required_unless_present_any = ["from", "soak", "traffic"])]
+    #[arg(long, conflicts_with_all = ["from", "to", "soak", "traffic", "popping"], required_unless_present_any = ["from", "soak", "traffic", "popping"])]
     pub path: Option<PathBuf>,
+    /// Popping benchmark: at this still camera (LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG) lower the
+    /// error bound from 8 px to 1 px over 120 completely loaded frames and report how much
+    /// each frame changes from the one before.
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["from", "to", "soak", "traffic"])]
+    pub popping: Option<String>,
     /// Traffic benchmark: replay this record (OpenSky state-vector CSV, plain or gzip) from
     /// --time at --speed for --frames frames at --fps, with the camera still at --camera
     /// (default: over the aircraft), and report the cost of ticks, of the layer's frames and

@@ -305,6 +305,31 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
 }
 
 #[test]
+fn bench_popping_reports_what_each_split_changes() {
+    let v = json(&globus(&[
+        "bench",
+        "--popping",
+        "7.6,46,8000,200,-10",
+        "--size",
+        "96x54",
+    ]));
+    assert_eq!(v["frames"], 121, "{v}");
+    let frames = v["per_frame"].as_array().unwrap();
+    let tiles = |f: &serde_json::Value| f["tiles"].as_u64().unwrap();
+    // The bound falls from 8 to 1 px: tiles split, and the picture changes where they do.
+    assert!(tiles(&frames[120]) > tiles(&frames[0]), "{v}");
+    assert!(
+        (frames[120]["sse_bound_px"].as_f64().unwrap() - 1.0).abs() < 1e-9,
+        "{v}"
+    );
+    assert!(frames[0]["mean_abs_change"].is_null());
+    let changing = v["frames_changing"].as_u64().unwrap();
+    assert!(changing > 0 && changing <= 120, "{v}");
+    let share = v["changed_share"]["max"].as_f64().unwrap();
+    assert!(share > 0.0 && share <= 1.0, "{v}");
+}
+
+#[test]
 fn scheme_aliases_name_the_same_tiles() {
     let tile = |scheme: &str| {
         json(&globus(&[

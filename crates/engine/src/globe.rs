@@ -340,6 +340,21 @@ impl Globe {
         self.lighting = lighting;
     }
 
+    /// Sets the screen-space error bound, pixels (what [`GlobeBuilder::max_sse_px`] set),
+    /// from the next frame; budgets and the quality loop work from it as before.
+    pub fn set_error_bound_px(&mut self, px: f64) -> Result<(), EngineError> {
+        if !(crate::builder::MIN_SSE_PX..=1000.0).contains(&px) {
+            return Err(EngineError::InvalidOption {
+                option: "error bound",
+                value: px.to_string(),
+                expected: "a pixel error from 0.1 to 1000",
+            });
+        }
+        self.settings.max_sse_px = px;
+        self.selection_options.max_sse_px = px;
+        Ok(())
+    }
+
     /// Whether the procedural planet's towns light its night side (on by default for the
     /// procedural planet, off with real data; night lights from an image replace them).
     pub fn set_procedural_lights(&mut self, on: bool) {

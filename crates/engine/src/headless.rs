@@ -161,6 +161,39 @@ pub fn save_png(image: &RgbaImage, path: &std::path::Path) -> Result<(), std::io
     globus_tiling::files::write_atomic(path, &png).map_err(|e| cannot(&e))
 }
 
+/// How much one frame differs from the frame before, as popping is measured: the mean
+/// absolute change of the colour channels (0..255) over all pixels, and the share of pixels
+/// whose largest channel change exceeds `threshold`. `None` for frames of different sizes.
+pub fn frame_change(before: &RgbaImage, after: &RgbaImage, threshold: u8) -> Option<FrameChange> {
+    if (before.width, before.height) != (after.width, after.height) || before.pixels.is_empty() {
+        return None;
+    }
+    let (mut sum, mut changed) = (0u64, 0u64);
+    for (p, q) in before
+        .pixels
+        .chunks_exact(4)
+        .zip(after.pixels.chunks_exact(4))
+    {
+        let d = [0, 1, 2].map(|k| p[k].abs_diff(q[k]));
+        sum += u64::from(d[0]) + u64::from(d[1]) + u64::from(d[2]);
+        changed += u64::from(d[0].max(d[1]).max(d[2]) > threshold);
+    }
+    let n = (before.pixels.len() / 4) as f64;
+    Some(FrameChange {
+        mean_abs: sum as f64 / (3.0 * n),
+        changed_share: changed as f64 / n,
+    })
+}
+
+/// See [`frame_change`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameChange {
+    /// Mean absolute change of a colour channel, 0..255.
+    pub mean_abs: f64,
+    /// Share of pixels with a channel changed by more than the threshold, 0..1.
+    pub changed_share: f64,
+}
+
 /// Pixels whose centre ray hits `body`, and how many of those show no terrain (alpha below
 /// 255): the holes a viewer would see inside the planet's silhouette.
 pub fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32) {
@@ -177,4 +210,32 @@ pub fn holes_inside(img: &RgbaImage, view: &View, body: &Ellipsoid) -> (u32, u32
         }
     }
     (inside, holes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_change_counts_channels_and_pixels() {
+        let image = |pixels: Vec<u8>| RgbaImage {
+            width: 2,
+            height: 1,
+            pixels,
+        };
+        let a = image(vec![10, 10, 10, 255, 100, 100, 100, 255]);
+        // The first pixel moves by 9 in one channel (over a threshold of 8), the second by 3
+        // in each; alpha is not colour.
+        let b = image(vec![19, 10, 10, 0, 103, 103, 103, 255]);
+        let c = frame_change(&a, &b, 8).expect("same size");
+        assert!((c.mean_abs - 18.0 / 6.0).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.changed_share, 0.5);
+        assert_eq!(frame_change(&a, &a, 8).map(|c| c.mean_abs), Some(0.0));
+        let other = RgbaImage {
+            width: 1,
+            height: 2,
+            pixels: a.pixels.clone(),
+        };
+        assert!(frame_change(&a, &other, 8).is_none());
+    }
 }

@@ -1,9 +1,10 @@
 //! `globus bench`: a camera path replayed offscreen (`path`), a jump between two views
-//! (`jump`), a soak of random flights (`soak`), or a traffic record replayed (`traffic`),
-//! each printing JSON.
+//! (`jump`), a soak of random flights (`soak`), a traffic record replayed (`traffic`), or
+//! the picture's jumps as the error bound falls (`popping`), each printing JSON.
 
 mod jump;
 mod path;
+mod popping;
 mod soak;
 mod traffic;
 
@@ -49,8 +50,14 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(record) = &a.traffic {
         return traffic::run(&a, &builder, record, (width, height));
     }
+    if let Some(camera) = &a.popping {
+        return popping::run(&a, &builder, camera, (width, height));
+    }
     let Some(path_file) = &a.path else {
-        bail!("bench needs --path FILE.json, or --from CAMERA --to CAMERA");
+        bail!(
+            "bench needs --path FILE.json, --from CAMERA --to CAMERA, --soak S, --traffic RECORD \
+             or --popping CAMERA"
+        );
     };
     path::run(&a, &builder, path_file, (width, height))
 }

@@ -1,0 +1,71 @@
+//! `globus bench --popping CAMERA`: how much the picture jumps when tiles split, with nothing
+//! else moving (issue 20's measurement). The camera stands still while the error bound is
+//! lowered from 8 px to 1 px over 120 frames (geometrically: splits come about evenly per
+//! frame, as levels halve the error); every frame is loaded completely before it is drawn, so
+//! what changes between two frames is only what the new bound split. Per frame: the mean
+//! absolute change of a colour channel against the frame before and the share of pixels
+//! changing by more than 8/255.
+
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use globus_engine::{GlobeBuilder, Headless, frame_change};
+
+use super::quantiles;
+use crate::args::{self, BenchArgs};
+
+/// Frames after the first, from the coarsest bound to the finest.
+const STEPS: u32 = 120;
+const COARSEST_PX: f64 = 8.0;
+const FINEST_PX: f64 = 1.0;
+/// A channel change above this is a visible change (of 255).
+const VISIBLE: u8 = 8;
+
+pub fn run(
+    a: &BenchArgs,
+    builder: &GlobeBuilder,
+    camera: &str,
+    (width, height): (u32, u32),
+) -> anyhow::Result<()> {
+    let spec = args::parse_camera(camera, false).context("--popping")?;
+    let mut off = Headless::new(builder, width, height)?;
+    super::light(a, &mut off)?;
+    let view = spec.view(off.globe(), a.globe.fov_deg, width, height);
+    let mut frames = Vec::new();
+    let mut before = None;
+    for step in 0..=STEPS {
+        let bound =
+            COARSEST_PX * (FINEST_PX / COARSEST_PX).powf(f64::from(step) / f64::from(STEPS));
+        off.globe_mut().set_error_bound_px(bound)?;
+        let frame = off.render_complete(&view, Duration::from_secs(300), &mut [])?;
+        if !frame.complete {
+            bail!("frame {step} (bound {bound:.2} px) did not finish loading in 300 s");
+        }
+        let change = before
+            .as_ref()
+            .and_then(|b| frame_change(b, &frame.image, VISIBLE));
+        frames.push(serde_json::json!({
+            "sse_bound_px": frame.report.sse_bound_px,
+            "tiles": frame.report.selection.selected,
+            "max_level": frame.report.selection.max_level,
+            "mean_abs_change": change.map(|c| c.mean_abs),
+            "changed_share": change.map(|c| c.changed_share),
+        }));
+        before = Some(frame.image);
+    }
+    let series =
+        |key: &str| -> Vec<f64> { frames.iter().filter_map(|f| f[key].as_f64()).collect() };
+    let (mean, share) = (series("mean_abs_change"), series("changed_share"));
+    let report = serde_json::json!({
+        "camera": camera,
+        "size": [width, height],
+        "bounds_px": [COARSEST_PX, FINEST_PX],
+        "frames": frames.len(),
+        "mean_abs_change": quantiles(mean.clone()),
+        "changed_share": quantiles(share.clone()),
+        "frames_changing": share.iter().filter(|&&s| s > 0.0).count(),
+        "per_frame": frames,
+    });
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(())
+}
