@@ -321,6 +321,25 @@ pub enum GeoCommand {
         #[arg(long)]
         level: u8,
     },
+    /// How steep the procedural planet is in a square window: the share of the area steeper
+    /// than 30 degrees (and 20, 40), the highest and mean heights.
+    Slopes {
+        /// Centre longitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lon: f64,
+        /// Centre latitude, degrees.
+        #[arg(long, allow_negative_numbers = true)]
+        lat: f64,
+        /// Width of the window, kilometres.
+        #[arg(long = "window-km", default_value_t = 20.0)]
+        window_km: f64,
+        /// Sample spacing, metres.
+        #[arg(long = "spacing-m", default_value_t = 30.0)]
+        spacing_m: f64,
+        /// Seed of the procedural planet.
+        #[arg(long, default_value_t = globus_engine::DEFAULT_SEED)]
+        seed: u64,
+    },
 }
 
 /// The planet-wide view `globus view` starts from.

@@ -28,6 +28,43 @@ pub fn cartographic(x: f64, y: f64, z: f64) -> anyhow::Result<String> {
     Ok(json!({"lon": c.lon_deg(), "lat": c.lat_deg(), "height": c.height_m}).to_string())
 }
 
+/// `globus geo slopes --lon LON --lat LAT`: the procedural planet's steepness around a point.
+pub fn slopes(
+    (lon_deg, lat_deg): (f64, f64),
+    window_km: f64,
+    spacing_m: f64,
+    seed: u64,
+) -> anyhow::Result<String> {
+    check_lon_lat(lon_deg, lat_deg)?;
+    if lat_deg.abs() > 85.0 {
+        bail!("latitude {lat_deg}: the window would wrap round the pole (at most 85 degrees)");
+    }
+    if !(1.0..=10_000.0).contains(&spacing_m) {
+        bail!("--spacing-m {spacing_m} must be from 1 to 10000 metres");
+    }
+    let samples = window_km * 1000.0 / spacing_m;
+    if !(2.0..=4096.0).contains(&samples) {
+        bail!(
+            "--window-km {window_km} at --spacing-m {spacing_m} is {samples:.0} samples across \
+             (2 to 4096)"
+        );
+    }
+    let planet = globus_terrain::ProceduralPlanet::new(seed);
+    let (h, side) = planet.height_window((lon_deg, lat_deg), window_km * 1000.0, spacing_m);
+    let share = |deg| globus_terrain::slopes::steep_share(&h, side, spacing_m, deg);
+    let highest = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mean = h.iter().sum::<f64>() / h.len() as f64;
+    Ok(json!({
+        "lon": lon_deg, "lat": lat_deg, "window_km": window_km, "spacing_m": spacing_m,
+        "seed": seed, "samples": side * side,
+        "steeper_than_20_deg": share(20.0),
+        "steeper_than_30_deg": share(30.0),
+        "steeper_than_40_deg": share(40.0),
+        "highest_m": highest, "mean_height_m": mean,
+    })
+    .to_string())
+}
+
 /// `globus geo tile --scheme S --lon LON --lat LAT --level Z`.
 pub fn tile(scheme: &str, lon_deg: f64, lat_deg: f64, level: u8) -> anyhow::Result<String> {
     let scheme: TilingScheme = scheme.parse()?;

@@ -188,6 +188,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     lat,
                     level,
                 } => geo_cmd::tile(&scheme, lon, lat, level)?,
+                GeoCommand::Slopes {
+                    lon,
+                    lat,
+                    window_km,
+                    spacing_m,
+                    seed,
+                } => geo_cmd::slopes((lon, lat), window_km, spacing_m, seed)?,
             };
             println!("{out}");
             Ok(())

@@ -80,6 +80,44 @@ fn geo_tile_names_a_tile_like_bing_and_tms() {
 }
 
 #[test]
+fn geo_slopes_measures_the_procedural_mountains() {
+    let v = json(&globus(&[
+        "geo",
+        "slopes",
+        "--lon",
+        "7.6",
+        "--lat",
+        "46",
+        "--window-km",
+        "3",
+    ]));
+    let share = |k: &str| v[k].as_f64().unwrap();
+    let (s20, s30, s40) = (
+        share("steeper_than_20_deg"),
+        share("steeper_than_30_deg"),
+        share("steeper_than_40_deg"),
+    );
+    // The default planet's range stands here: real relief, steeper shares nested.
+    assert!(v["highest_m"].as_f64().unwrap() > 1_500.0, "{v}");
+    assert!(s20 > 0.0 && s20 >= s30 && s30 >= s40 && s20 <= 1.0, "{v}");
+    assert_eq!(v["samples"], 101 * 101, "{v}");
+    fails_with_one_line(&["geo", "slopes", "--lon", "0", "--lat", "89"], &["85"]);
+    fails_with_one_line(
+        &[
+            "geo",
+            "slopes",
+            "--lon",
+            "0",
+            "--lat",
+            "0",
+            "--spacing-m",
+            "0",
+        ],
+        &["--spacing-m"],
+    );
+}
+
+#[test]
 fn bad_arguments_end_with_one_clear_line() {
     let png = std::env::temp_dir().join("globus-cli-test.png");
     let png = png.to_str().unwrap();

@@ -22,6 +22,7 @@ pub mod noise;
 mod planet;
 pub mod quantized_mesh;
 pub mod refine;
+pub mod slopes;
 mod tile;
 
 /// The largest height above or below the ellipsoid any input may claim, metres. Earth spans
