@@ -423,6 +423,16 @@ fn mean_brightness(img: &RgbaImage, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) 
     sum / f64::from(n)
 }
 
+/// Renders `view` completely under `sun`, saves it as `name` and returns the picture.
+fn sunlit(off: &mut Headless, view: &View, name: &str, sun: globus_engine::Lighting) -> RgbaImage {
+    off.globe_mut().set_lighting(Some(sun));
+    let frame = off.render_complete(view, TIMEOUT, &mut []).expect("render");
+    assert!(frame.complete, "{name}: tiles still loading");
+    let dir = globus_test_support::output_dir("rendering");
+    save_png(&frame.image, &dir.join(format!("{name}.png"))).expect("save");
+    frame.image
+}
+
 #[test]
 fn the_sun_at_a_moment_lights_the_day_side_and_leaves_the_night_side_dark() {
     // Straight down on (0, 0) from 15,000 km at the March 2026 equinox: at 12:00 UTC the
@@ -431,15 +441,9 @@ fn the_sun_at_a_moment_lights_the_day_side_and_leaves_the_night_side_dark() {
     let (w, h) = (240u32, 240u32);
     let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
     let view = camera(0.0, 0.0, 15_000_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
-    let dir = globus_test_support::output_dir("rendering");
     let mut shot = |name: &str, unix_s: f64| {
-        off.globe_mut()
-            .set_lighting(Some(globus_engine::Lighting::at_time(unix_s)));
-        let frame = off
-            .render_complete(&view, TIMEOUT, &mut [])
-            .expect("render");
-        save_png(&frame.image, &dir.join(format!("sun_{name}.png"))).expect("save");
-        frame.image
+        let sun = globus_engine::Lighting::at_time(unix_s);
+        sunlit(&mut off, &view, &format!("sun_{name}"), sun)
     };
     // 2026-03-20T12:00:00Z and the hours around it.
     let noon = 1_774_008_000.0;
@@ -495,15 +499,8 @@ fn night_lights_shine_where_their_image_puts_them_and_only_at_night() {
     let mut lit = Headless::new(&lit_builder, w, h).expect("a GPU or lavapipe");
     let mut plain = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
     let view = camera(10.0, 50.0, 3_000_000.0, 0.0, -90.0, false).view(lit.globe(), 60.0, w, h);
-    let dir = globus_test_support::output_dir("rendering");
     let shot = |off: &mut Headless, name: &str, sun: Lighting| {
-        off.globe_mut().set_lighting(Some(sun));
-        let frame = off
-            .render_complete(&view, TIMEOUT, &mut [])
-            .expect("render");
-        assert!(frame.complete, "{name}: tiles still loading");
-        save_png(&frame.image, &dir.join(format!("night_{name}.png"))).expect("save");
-        frame.image
+        sunlit(off, &view, &format!("night_{name}"), sun)
     };
     // The Sun over the antimeridian (the whole view is in night), then over the view.
     let night = Lighting::sun_over(std::f64::consts::PI, 0.0);
@@ -577,17 +574,9 @@ fn the_procedural_planet_has_town_lights_at_night_only() {
     let (w, h) = (240u32, 240u32);
     let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
     let view = camera(10.0, 48.0, 3_000_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
-    let dir = globus_test_support::output_dir("rendering");
     let mut shot = |name: &str, sun: Lighting, lights: bool| {
-        let globe = off.globe_mut();
-        globe.set_lighting(Some(sun));
-        globe.set_procedural_lights(lights);
-        let frame = off
-            .render_complete(&view, TIMEOUT, &mut [])
-            .expect("render");
-        assert!(frame.complete, "{name}: tiles still loading");
-        save_png(&frame.image, &dir.join(format!("towns_{name}.png"))).expect("save");
-        frame.image
+        off.globe_mut().set_procedural_lights(lights);
+        sunlit(&mut off, &view, &format!("towns_{name}"), sun)
     };
     let night = Lighting::sun_over(std::f64::consts::PI, 0.0);
     let day = Lighting::sun_over(10f64.to_radians(), 48f64.to_radians());

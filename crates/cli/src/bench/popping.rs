@@ -56,14 +56,15 @@ pub fn run(
     let series =
         |key: &str| -> Vec<f64> { frames.iter().filter_map(|f| f[key].as_f64()).collect() };
     let (mean, share) = (series("mean_abs_change"), series("changed_share"));
+    let changing = share.iter().filter(|&&s| s > 0.0).count();
     let report = serde_json::json!({
         "camera": camera,
         "size": [width, height],
         "bounds_px": [COARSEST_PX, FINEST_PX],
         "frames": frames.len(),
-        "mean_abs_change": quantiles(mean.clone()),
-        "changed_share": quantiles(share.clone()),
-        "frames_changing": share.iter().filter(|&&s| s > 0.0).count(),
+        "mean_abs_change": quantiles(mean),
+        "changed_share": quantiles(share),
+        "frames_changing": changing,
         "per_frame": frames,
     });
     println!("{}", serde_json::to_string_pretty(&report)?);

@@ -7,16 +7,15 @@ use std::collections::BinaryHeap;
 
 use super::orient;
 use super::scan::{Scanner, Verdict};
-use crate::adaptive::HeightGrid;
 
 const NONE: u32 = u32::MAX;
 
-/// Inserts samples until the mesh is within `max_error` of `grid`; returns the vertices and
+/// Inserts samples until the mesh is within the scanner's bound of its grid; returns the vertices and
 /// the triangles (counter-clockwise from above).
-pub(super) fn refine(grid: &HeightGrid, max_error: f64) -> (Vec<[u16; 2]>, Vec<[u32; 3]>) {
-    let n = (grid.side() - 1) as u16;
+pub(super) fn refine(scanner: &Scanner<'_>) -> (Vec<[u16; 2]>, Vec<[u32; 3]>) {
+    let n = (scanner.grid().side() - 1) as u16;
     let mut r = Refiner {
-        scanner: Scanner::new(grid, max_error as f32),
+        scanner,
         points: vec![[0, 0], [n, 0], [n, n], [0, n]],
         tris: Vec::new(),
         twin: Vec::new(),
@@ -67,7 +66,7 @@ impl Ord for Entry {
 }
 
 struct Refiner<'a> {
-    scanner: Scanner<'a>,
+    scanner: &'a Scanner<'a>,
     points: Vec<[u16; 2]>,
     tris: Vec<u32>,
     twin: Vec<u32>,

@@ -62,9 +62,10 @@ pub fn decimate(grid: &HeightGrid, max_error: f64) -> AdaptiveMesh {
 
 /// [`decimate`] with all options.
 pub fn decimate_with(grid: &HeightGrid, options: &DecimateOptions) -> AdaptiveMesh {
-    let (vertices, triangles) = insert::refine(grid, options.max_error);
+    let scanner = scan::Scanner::new(grid, options.max_error as f32);
+    let (vertices, triangles) = insert::refine(&scanner);
     let triangles = if options.remove_pass {
-        remove::remove_vertices(grid, &vertices, triangles, options)
+        remove::remove_vertices(&scanner, &vertices, triangles, options)
     } else {
         triangles
     };

@@ -10,11 +10,12 @@ use crate::adaptive::HeightGrid;
 
 /// Removes interior vertices while the bound holds; returns the surviving triangles.
 pub(super) fn remove_vertices(
-    grid: &HeightGrid,
+    scanner: &Scanner<'_>,
     points: &[[u16; 2]],
     triangles: Vec<[u32; 3]>,
     options: &DecimateOptions,
 ) -> Vec<[u32; 3]> {
+    let grid = scanner.grid();
     let mut m = Soup {
         grid,
         points,
@@ -22,7 +23,7 @@ pub(super) fn remove_vertices(
         alive: Vec::new(),
         fans: vec![Vec::new(); points.len()],
         limit: options.max_error,
-        scanner: Scanner::new(grid, options.max_error as f32),
+        scanner,
         scratch: Scratch::default(),
     };
     m.alive = vec![true; m.tris.len()];
@@ -120,7 +121,7 @@ struct Soup<'a> {
     /// Per vertex, its live triangles.
     fans: Vec<Vec<u32>>,
     limit: f64,
-    scanner: Scanner<'a>,
+    scanner: &'a Scanner<'a>,
     scratch: Scratch,
 }
 

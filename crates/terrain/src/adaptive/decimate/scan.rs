@@ -44,6 +44,11 @@ impl<'a> Scanner<'a> {
         }
     }
 
+    /// The grid scanned.
+    pub(super) fn grid(&self) -> &'a HeightGrid {
+        self.grid
+    }
+
     /// Whether triangle `p` holds the bound, with its largest distance; with `stop_early`,
     /// a triangle beyond the bound is given up as soon as one sample shows it (its worst
     /// sample is then only the first found beyond).
