@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
-use globus_engine::{CameraSpec, GlobeBuilder, SourceSpec};
+use globus_engine::{Atmosphere, CameraSpec, Ellipsoid, GlobeBuilder, SourceSpec};
 
 use crate::config::{self, Config};
 use crate::geo_cmd;
@@ -130,6 +130,14 @@ pub struct GlobeArgs {
     /// the Sun is down (see --time); images wider than 8192 are scaled down.
     #[arg(long = "night-imagery")]
     pub night_imagery: Option<PathBuf>,
+    /// The air: `earth` (Rayleigh and Mie scattering with ozone: the sky, haze over distant
+    /// ground, reddened low sunlight) or `none` (black sky, no haze). Default: the Earth's.
+    #[arg(long, value_parser = ["earth", "none"])]
+    pub atmosphere: Option<String>,
+    /// Load full detail where haze hides it (by default the error of distant tiles counts
+    /// times the contrast the air lets through, as CesiumJS's fog does).
+    #[arg(long)]
+    pub no_fog: bool,
 }
 
 #[derive(Args)]
@@ -516,6 +524,16 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     for t in &a.terrain {
         builder.terrain(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--terrain: {e}"))?);
     }
+    match a.atmosphere.as_deref() {
+        Some("none") => {
+            builder.atmosphere(Some(Atmosphere::none(&Ellipsoid::WGS84)));
+        }
+        Some(_) => {
+            builder.atmosphere(Some(Atmosphere::earth(&Ellipsoid::WGS84)));
+        }
+        None => {}
+    }
+    builder.fog(!a.no_fog);
     if let Some(path) = &a.night_imagery {
         builder.night_lights(Some(std::sync::Arc::new(night_lights(path)?)));
     }

@@ -7,7 +7,7 @@
 
 use std::sync::Arc;
 
-use globus_geo::Ellipsoid;
+use globus_geo::{Atmosphere, Ellipsoid};
 use globus_render::{GpuContext, NightLights, TilePoolOptions};
 use globus_stream::decode::DecodeLimits;
 use globus_stream::fetch::{DiskCacheOptions, HttpClient, HttpOptions};
@@ -72,6 +72,8 @@ pub struct GlobeBuilder {
     viewport: Option<(u32, u32)>,
     source: Option<Arc<dyn TerrainSource>>,
     night_lights: Option<Arc<NightLights>>,
+    atmosphere: Option<Atmosphere>,
+    fog: bool,
 }
 
 impl Default for GlobeBuilder {
@@ -99,6 +101,8 @@ impl Default for GlobeBuilder {
             viewport: None,
             source: None,
             night_lights: None,
+            atmosphere: None,
+            fog: true,
         }
     }
 }
@@ -199,6 +203,32 @@ impl GlobeBuilder {
     pub fn night_lights(&mut self, lights: Option<Arc<NightLights>>) -> &mut Self {
         self.night_lights = lights;
         self
+    }
+
+    /// The air over the body (default `None`: [`Atmosphere::for_body`], the Earth's over an
+    /// Earth-sized body and none over others); [`Atmosphere::none`] draws no sky or haze.
+    /// It is moved onto the globe's body ([`Atmosphere::over`]).
+    pub fn atmosphere(&mut self, atmosphere: Option<Atmosphere>) -> &mut Self {
+        self.atmosphere = atmosphere;
+        self
+    }
+
+    /// The air drawn over `body`.
+    pub(crate) fn atmosphere_over(&self, body: &Ellipsoid) -> Atmosphere {
+        self.atmosphere
+            .map_or_else(|| Atmosphere::for_body(body), |a| a.over(body))
+    }
+
+    /// Whether haze lowers the detail loaded where it hides it (default on; see
+    /// [`crate::Globe::set_fog`]).
+    pub fn fog(&mut self, on: bool) -> &mut Self {
+        self.fog = on;
+        self
+    }
+
+    /// Whether [`GlobeBuilder::fog`] is on.
+    pub(crate) fn fog_on(&self) -> bool {
+        self.fog
     }
 
     /// The night lights, if set.

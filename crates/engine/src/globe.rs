@@ -20,7 +20,7 @@
 
 use std::time::{Duration, Instant};
 
-use globus_geo::{Cartographic, DVec3, Ellipsoid, View};
+use globus_geo::{Atmosphere, Cartographic, DVec3, Ellipsoid, View};
 use globus_render::{
     DrawStats, FrameCamera, FrameFormats, FrameInputs, FrameTargets, GlobeRenderer, Lighting,
     NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, NightLights, PoolStats, TilePool, near_plane_m,
@@ -131,6 +131,8 @@ pub struct Globe {
     formats: FrameFormats,
     targets: Option<FrameTargets>,
     selection_options: SelectionOptions,
+    /// Whether haze lowers the detail needed ([`Globe::set_fog`]).
+    fog: bool,
     settings: Settings,
     selection: Selection,
     plan: FramePlan,
@@ -213,13 +215,16 @@ impl Globe {
         );
         let slots = memory.map_or(settings.gpu_slots, |m| m.gpu_slots);
         let pool = TilePool::new(device, settings.pool_options(slots));
-        let selection_options = SelectionOptions {
+        let mut selection_options = SelectionOptions {
             max_sse_px: settings.max_sse_px,
             occluder: *layer.occluder(),
             near_m: 0.01,
             max_level: layer.max_level(),
+            fog: None,
         };
         let formats = FrameFormats::new(colour_format);
+        let atmosphere = builder.atmosphere_over(layer.ellipsoid());
+        selection_options.fog = (builder.fog_on() && !atmosphere.is_none()).then_some(atmosphere);
         tracing::debug!(
             source = layer.source().name(),
             slots,
@@ -231,7 +236,8 @@ impl Globe {
             queue: queue.clone(),
             layer,
             renderer: {
-                let mut renderer = GlobeRenderer::new(device, formats, pool);
+                let mut renderer = GlobeRenderer::new(device, queue, formats, pool);
+                renderer.set_atmosphere(device, queue, atmosphere);
                 renderer.set_night_lights(device, queue, builder.night_lights_ref());
                 renderer.set_procedural_lights(!builder.uses_real_data());
                 renderer
@@ -239,6 +245,7 @@ impl Globe {
             formats,
             targets,
             selection_options,
+            fog: builder.fog_on(),
             settings,
             selection: Selection::default(),
             plan: FramePlan::default(),
@@ -334,10 +341,37 @@ impl Globe {
         self.renderer.pool().stats()
     }
 
-    /// Sets the sun and air (`None`: a default sun for each view,
+    /// Sets the sun and exposure (`None`: a default sun for each view,
     /// [`Globe::default_lighting`]).
     pub fn set_lighting(&mut self, lighting: Option<Lighting>) {
         self.lighting = lighting;
+    }
+
+    /// Sets the air drawn over the body from the next frame (by default
+    /// [`Atmosphere::for_body`]: the Earth's over an Earth-sized body, none over others);
+    /// [`Atmosphere::none`] for none.
+    pub fn set_atmosphere(&mut self, atmosphere: Atmosphere) {
+        self.renderer
+            .set_atmosphere(&self.device, &self.queue, atmosphere);
+        self.update_fog();
+    }
+
+    /// Whether the haze lowers the detail loaded where it hides it (on by default with air;
+    /// CesiumJS's `scene.fog`): a tile's screen-space error counts times the contrast the
+    /// air lets through from it to the eye ([`globus_tiling::SelectionOptions::fog`]).
+    pub fn set_fog(&mut self, on: bool) {
+        self.fog = on;
+        self.update_fog();
+    }
+
+    fn update_fog(&mut self) {
+        let air = *self.renderer.atmosphere();
+        self.selection_options.fog = (self.fog && !air.is_none()).then_some(air);
+    }
+
+    /// The air drawn over the body.
+    pub fn atmosphere(&self) -> Atmosphere {
+        *self.renderer.atmosphere()
     }
 
     /// Sets the screen-space error bound, pixels (what [`GlobeBuilder::max_sse_px`] set),
@@ -521,13 +555,7 @@ impl Globe {
             &self.queue,
             &FrameInputs {
                 camera: &camera,
-                eye_height_m: eye.height_m,
-                eye_up: ellipsoid.geodetic_normal_from_lon_lat(eye.lon_rad, eye.lat_rad),
-                planet_radius_m: ellipsoid.mean_radius(),
-                eccentricity_squared: {
-                    let r = ellipsoid.radii();
-                    1.0 - (r.z * r.z) / (r.x * r.x)
-                },
+                ellipsoid,
                 lighting,
                 tiles: &tiles,
             },

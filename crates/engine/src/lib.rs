@@ -84,7 +84,7 @@ pub use query::{TerrainHeight, ray_march};
 pub use traffic::{Follow, TrafficLayer, TrafficStats, TrafficStyle};
 pub use vector::{FeatureId, VectorLayer, VectorStats};
 
-pub use globus_geo::{Cartographic, DQuat, DVec2, DVec3, Ellipsoid, Projection, View};
+pub use globus_geo::{Atmosphere, Cartographic, DQuat, DVec2, DVec3, Ellipsoid, Projection, View};
 pub use globus_render::{
     DrawStats, FrameCamera, FrameFormats, GpuContext, Lighting, NightLights, NightLightsError,
     PoolStats, RgbaImage,

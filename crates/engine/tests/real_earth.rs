@@ -324,9 +324,10 @@ fn tiles_whose_imagery_is_loading_show_their_ancestors_imagery_cropped() {
     let view = cam.view(off.globe(), 60.0, w, h);
 
     // Flat light and no air: the pictures are the imagery itself.
+    let airless = globus_engine::Atmosphere::none(&off.globe().ellipsoid());
+    off.globe_mut().set_atmosphere(airless);
     off.globe_mut().set_lighting(Some(globus_engine::Lighting {
         ambient: 1.0,
-        atmosphere_m: 1.0,
         inscatter_gain: 0.0,
         exposure: 1.0,
         ..globus_engine::Lighting::sun_over(0.0, 0.0)

@@ -154,6 +154,12 @@ impl OrientedBox {
         self.distance_squared_to(point).sqrt()
     }
 
+    /// The point of the box nearest to `point` (`point` itself inside).
+    pub fn closest_point(&self, point: DVec3) -> DVec3 {
+        let local = self.axes.transpose() * (point - self.centre);
+        self.centre + self.axes * local.clamp(-self.half_extents, self.half_extents)
+    }
+
     /// Squared distance from `point` to the box, 0 inside.
     #[inline]
     pub fn distance_squared_to(&self, point: DVec3) -> f64 {

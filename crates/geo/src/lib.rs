@@ -7,11 +7,13 @@
 //! * [`View`] and [`Frustum`]: a camera in f64 ECEF (perspective or orthographic) and the
 //!   planes of what it sees.
 //! * [`EllipsoidalOccluder`]: horizon culling (Cesium's ellipsoid-scaled occluder point).
+//! * [`Atmosphere`]: a body's air (Hillaire 2020's model) and the tables the GPU reads.
 //! * [`SunPosition`]: where the Sun is at a moment (Meeus/NOAA, checked against NREL's SPA).
 //!
 //! Everything is in metres and radians, f64, in Earth-centred Earth-fixed (ECEF) coordinates
 //! unless the name says otherwise. The only dependency is `glam`.
 
+mod atmosphere;
 mod bounds;
 mod cartographic;
 mod ellipsoid;
@@ -20,6 +22,10 @@ mod horizon;
 mod sun;
 mod view;
 
+pub use atmosphere::{
+    Atmosphere, AtmosphereTables, LutGeometry, MULTIPLE_SCATTERING_SIZE, MultipleScatteringLut,
+    TRANSMITTANCE_SIZE, TransmittanceLut, cornette_shanks,
+};
 pub use bounds::{BoundingSphere, OrientedBox};
 pub use cartographic::Cartographic;
 pub use ellipsoid::{Ellipsoid, EnuFrame};

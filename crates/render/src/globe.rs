@@ -14,10 +14,11 @@
 use std::mem::size_of;
 
 use bytemuck::{Pod, Zeroable};
-use globus_geo::DVec3;
+use globus_geo::{Atmosphere, DVec3, Ellipsoid};
 use globus_terrain::TerrainVertex;
 use globus_tiling::TileKey;
 
+use crate::air::AirResources;
 use crate::camera::FrameCamera;
 use crate::night::NightLights;
 use crate::pool::TilePool;
@@ -27,7 +28,7 @@ use crate::target::{DEPTH_FORMAT, FrameFormats};
 /// Uniforms shared by all pipelines (mirrors `Frame` in `common.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct FrameUniforms {
+pub(crate) struct FrameUniforms {
     clip_from_eye: [[f32; 4]; 4],
     eye_from_clip: [[f32; 4]; 4],
     eye_up_height: [f32; 4],
@@ -49,16 +50,15 @@ struct DrawIndexedArgs {
     first_instance: u32,
 }
 
-/// Sun and atmosphere.
+/// The Sun and how the picture is exposed (the air itself is the body's:
+/// [`GlobeRenderer::set_atmosphere`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lighting {
     /// Unit vector towards the sun, ECEF axes.
     pub sun_direction: DVec3,
     /// Light on faces turned away from the sun, 0..1.
     pub ambient: f32,
-    /// Thickness of the atmosphere shell, metres.
-    pub atmosphere_m: f32,
-    /// Brightness of light scattered by the air relative to the sunlit ground.
+    /// Brightness of light scattered by the air, 1 physical (0: the air only dims).
     pub inscatter_gain: f32,
     /// Brightness multiplier before tone mapping.
     pub exposure: f32,
@@ -81,7 +81,6 @@ impl Lighting {
         Self {
             sun_direction: DVec3::new(cl * co, cl * so, sl),
             ambient: 0.1,
-            atmosphere_m: 60_000.0,
             inscatter_gain: 1.0,
             exposure: 1.25,
         }
@@ -92,14 +91,8 @@ impl Lighting {
 pub struct FrameInputs<'a> {
     /// The camera (eye, matrices, near plane).
     pub camera: &'a FrameCamera,
-    /// Height of the eye above the ellipsoid, metres (f64, for the atmosphere).
-    pub eye_height_m: f64,
-    /// Geodetic up at the eye.
-    pub eye_up: DVec3,
-    /// Mean radius of the planet, metres.
-    pub planet_radius_m: f64,
-    /// The planet's first eccentricity squared (for geodetic latitudes on the GPU).
-    pub eccentricity_squared: f64,
+    /// The body (for the atmosphere's space and geodetic latitudes on the GPU).
+    pub ellipsoid: Ellipsoid,
     /// Sun and air.
     pub lighting: Lighting,
     /// Tiles to draw; each must be resident in the pool (others are skipped and counted).
@@ -127,11 +120,15 @@ pub struct DrawStats {
 /// Pipelines and per-frame buffers for drawing the globe.
 pub struct GlobeRenderer {
     frame_buffer: wgpu::Buffer,
+    frame_layout: wgpu::BindGroupLayout,
     frame_bind_group: wgpu::BindGroup,
+    air: AirResources,
     terrain_layout: wgpu::BindGroupLayout,
     terrain_bind_group: Option<wgpu::BindGroup>,
     terrain_pipeline: wgpu::RenderPipeline,
     sky_pipeline: wgpu::RenderPipeline,
+    /// The sky seen from the eye, rebuilt each frame the eye is in the air (`sky.wgsl`).
+    sky_view: SkyView,
     offset_buffer: wgpu::Buffer,
     offsets: Vec<[f32; 4]>,
     colour_map_buffer: wgpu::Buffer,
@@ -154,19 +151,34 @@ pub struct GlobeRenderer {
 
 impl GlobeRenderer {
     /// Pipelines for rendering frames of `formats` with the given pool.
-    pub fn new(device: &wgpu::Device, formats: FrameFormats, pool: TilePool) -> Self {
+    ///
+    /// The air is the Earth's over WGS84 until [`GlobeRenderer::set_atmosphere`] says
+    /// otherwise.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        formats: FrameFormats,
+        pool: TilePool,
+    ) -> Self {
+        let [a1, a2, a3, a4] = AirResources::layout_entries();
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: wgpu::BufferSize::new(size_of::<FrameUniforms>() as u64),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: wgpu::BufferSize::new(size_of::<FrameUniforms>() as u64),
+                    },
+                    count: None,
                 },
-                count: None,
-            }],
+                a1,
+                a2,
+                a3,
+                a4,
+            ],
         });
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame uniforms"),
@@ -174,17 +186,12 @@ impl GlobeRenderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let frame_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame"),
-            layout: &frame_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: frame_buffer.as_entire_binding(),
-            }],
-        });
+        let air = AirResources::new(device, queue, Atmosphere::earth(&Ellipsoid::WGS84));
+        let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &air);
         let terrain_layout = terrain_bind_group_layout(device);
         let terrain_pipeline = terrain_pipeline(device, formats, &frame_layout, &terrain_layout);
-        let sky_pipeline = sky_pipeline(device, formats, &frame_layout);
+        let sky_view = SkyView::new(device, &frame_layout);
+        let sky_pipeline = sky_pipeline(device, formats, &frame_layout, &sky_view.layout);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("terrain colour"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -221,11 +228,14 @@ impl GlobeRenderer {
         });
         Self {
             frame_buffer,
+            frame_layout,
             frame_bind_group,
+            air,
             terrain_layout,
             terrain_bind_group: None,
             terrain_pipeline,
             sky_pipeline,
+            sky_view,
             offset_buffer,
             offsets: vec![[0.0; 4]; slots as usize],
             colour_map_buffer,
@@ -241,6 +251,28 @@ impl GlobeRenderer {
             night_width: 0,
             procedural_lights: false,
         }
+    }
+
+    /// Draws `atmosphere` (its sky, haze and the sunlight it lets through) from the next
+    /// frame; [`Atmosphere::none`] draws none. Its tables are built on first use in the
+    /// process (tens of milliseconds).
+    pub fn set_atmosphere(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        atmosphere: Atmosphere,
+    ) {
+        if self.air.atmosphere == atmosphere {
+            return;
+        }
+        self.air = AirResources::new(device, queue, atmosphere);
+        self.frame_bind_group =
+            frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.air);
+    }
+
+    /// The air drawn.
+    pub fn atmosphere(&self) -> &Atmosphere {
+        &self.air.atmosphere
     }
 
     /// Draws procedural towns on the night side's land (for a procedural planet), unless
@@ -283,18 +315,18 @@ impl GlobeRenderer {
         let (clip_from_eye, eye_from_clip) = (camera.clip_from_eye(), camera.eye_from_clip());
         let l = &inputs.lighting;
         let sun = l.sun_direction.normalize_or_zero().as_vec3();
-        let up = inputs.eye_up.as_vec3();
+        // The eye in the atmosphere's space: its direction from the centre and its height
+        // over the sphere, from f64 (the one planet-sized subtraction).
+        let radii = inputs.ellipsoid.radii();
+        let stretched = view.position * (DVec3::splat(radii.x) / radii);
+        let eye_r = stretched.length();
+        let up = (stretched / eye_r.max(1.0)).as_vec3();
         let uniforms = FrameUniforms {
             clip_from_eye: clip_from_eye.to_cols_array_2d(),
             eye_from_clip: eye_from_clip.to_cols_array_2d(),
-            eye_up_height: [up.x, up.y, up.z, inputs.eye_height_m as f32],
+            eye_up_height: [up.x, up.y, up.z, (eye_r - radii.x) as f32],
             sun: [sun.x, sun.y, sun.z, l.ambient],
-            planet: [
-                inputs.planet_radius_m as f32,
-                l.atmosphere_m,
-                l.inscatter_gain,
-                l.exposure,
-            ],
+            planet: [radii.x as f32, 0.0, l.inscatter_gain, l.exposure],
             viewport: [
                 view.width_px as f32,
                 view.height_px as f32,
@@ -303,7 +335,8 @@ impl GlobeRenderer {
             ],
             eye_position: {
                 let eye = view.position.as_vec3();
-                [eye.x, eye.y, eye.z, inputs.eccentricity_squared as f32]
+                let e2 = 1.0 - (radii.z * radii.z) / (radii.x * radii.x);
+                [eye.x, eye.y, eye.z, e2 as f32]
             },
             night: [
                 if self.night_width > 0 { 1.0 } else { 0.0 },
@@ -313,6 +346,10 @@ impl GlobeRenderer {
             ],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));
+        let air = &self.air.atmosphere;
+        if !air.is_none() && eye_r - radii.x < air.thickness_m && !camera.is_orthographic() {
+            self.sky_view.render(device, queue, &self.frame_bind_group);
+        }
 
         self.draws.clear();
         let mut missing = 0;
@@ -401,6 +438,7 @@ impl GlobeRenderer {
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
         pass.set_pipeline(&self.sky_pipeline);
+        pass.set_bind_group(1, &self.sky_view.bind_group, &[]);
         pass.draw(0..3, 0..1);
         if let Some(bind_group) = &self.terrain_bind_group
             && !self.draws.is_empty()
@@ -455,6 +493,30 @@ impl GlobeRenderer {
             ],
         })
     }
+}
+
+/// The frame group: the uniforms and the air.
+fn frame_bind_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    buffer: &wgpu::Buffer,
+    air: &AirResources,
+) -> wgpu::BindGroup {
+    let [a1, a2, a3, a4] = air.entries();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("frame"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: buffer.as_entire_binding(),
+            },
+            a1,
+            a2,
+            a3,
+            a4,
+        ],
+    })
 }
 
 /// The night lights' texture with its mips (R8), or a 1 x 1 black one.
@@ -640,6 +702,7 @@ fn sky_pipeline(
     device: &wgpu::Device,
     formats: FrameFormats,
     frame_layout: &wgpu::BindGroupLayout,
+    sky_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("sky"),
@@ -647,7 +710,7 @@ fn sky_pipeline(
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some("sky"),
-        bind_group_layouts: &[Some(frame_layout)],
+        bind_group_layouts: &[Some(frame_layout), Some(sky_layout)],
         immediate_size: 0,
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -677,4 +740,220 @@ fn sky_pipeline(
         multiview_mask: None,
         cache: None,
     })
+}
+
+/// Hillaire's sky-view table: the sky seen from the eye, 192 x 108 half floats rendered by
+/// `fs_sky_view` before the frame (while the eye is in the air) and read by `fs_sky`.
+struct SkyView {
+    pipeline: wgpu::RenderPipeline,
+    target: wgpu::TextureView,
+    layout: wgpu::BindGroupLayout,
+    bind_group: wgpu::BindGroup,
+}
+
+impl SkyView {
+    const SIZE: (u32, u32) = (192, 108);
+    const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+    fn new(device: &wgpu::Device, frame_layout: &wgpu::BindGroupLayout) -> Self {
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("sky view"),
+            size: wgpu::Extent3d {
+                width: Self::SIZE.0,
+                height: Self::SIZE.1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: Self::FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let target = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("sky view"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sky view"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sky view"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&target),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("sky view"),
+            source: wgpu::ShaderSource::Wgsl(shaders::SKY.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sky view"),
+            bind_group_layouts: &[Some(frame_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("sky view"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_sky"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_sky_view"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: Self::FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            pipeline,
+            target,
+            layout,
+            bind_group,
+        }
+    }
+
+    /// Renders the table from this frame's uniforms (written to the queue before).
+    fn render(&self, device: &wgpu::Device, queue: &wgpu::Queue, frame: &wgpu::BindGroup) {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("sky view"),
+        });
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("sky view"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.target,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, frame, &[]);
+            pass.draw(0..3, 0..1);
+        }
+        queue.submit([encoder.finish()]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::mem::{offset_of, size_of};
+
+    use super::FrameUniforms;
+    use crate::air::AtmosphereUniforms;
+
+    /// The size and member offsets of the WGSL struct `name` as naga lays it out.
+    fn wgsl_layout(source: &str, name: &str) -> (u32, Vec<(String, u32)>) {
+        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+        let (_, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no struct {name}"));
+        match &ty.inner {
+            naga::TypeInner::Struct { members, span } => (
+                *span,
+                members
+                    .iter()
+                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                    .collect(),
+            ),
+            other => panic!("{name} is {other:?}"),
+        }
+    }
+
+    fn check(name: &str, size: usize, offsets: &[(&str, usize)]) {
+        for (shader, source) in [
+            ("terrain", crate::shaders::TERRAIN),
+            ("sky", crate::shaders::SKY),
+        ] {
+            let (span, members) = wgsl_layout(source, name);
+            assert_eq!(span as usize, size, "{shader}: {name}'s size");
+            let got: Vec<(&str, usize)> = members
+                .iter()
+                .map(|(n, o)| (n.as_str(), *o as usize))
+                .collect();
+            assert_eq!(got, offsets, "{shader}: {name}'s members");
+        }
+    }
+
+    #[test]
+    fn uniform_structs_match_their_wgsl_layouts() {
+        check(
+            "Frame",
+            size_of::<FrameUniforms>(),
+            &[
+                ("clip_from_eye", offset_of!(FrameUniforms, clip_from_eye)),
+                ("eye_from_clip", offset_of!(FrameUniforms, eye_from_clip)),
+                ("eye_up_height", offset_of!(FrameUniforms, eye_up_height)),
+                ("sun", offset_of!(FrameUniforms, sun)),
+                ("planet", offset_of!(FrameUniforms, planet)),
+                ("viewport", offset_of!(FrameUniforms, viewport)),
+                ("eye_position", offset_of!(FrameUniforms, eye_position)),
+                ("night", offset_of!(FrameUniforms, night)),
+            ],
+        );
+        check(
+            "Atmosphere",
+            size_of::<AtmosphereUniforms>(),
+            &[
+                ("rayleigh", offset_of!(AtmosphereUniforms, rayleigh)),
+                ("mie", offset_of!(AtmosphereUniforms, mie)),
+                ("ozone", offset_of!(AtmosphereUniforms, ozone)),
+                ("shell", offset_of!(AtmosphereUniforms, shell)),
+                ("stretch", offset_of!(AtmosphereUniforms, stretch)),
+            ],
+        );
+    }
 }

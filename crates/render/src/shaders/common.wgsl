@@ -6,11 +6,12 @@ struct Frame {
     clip_from_eye: mat4x4<f32>,
     // Inverse of clip_from_eye (rotation and projection only): clip -> eye-relative direction.
     eye_from_clip: mat4x4<f32>,
-    // xyz: geodetic up at the eye; w: eye height above the ellipsoid, metres (from f64).
+    // The eye in the atmosphere's space (the body stretched into a sphere, see `Atmosphere`):
+    // xyz: unit direction from the centre; w: height above the sphere, metres (from f64).
     eye_up_height: vec4<f32>,
     // xyz: unit direction towards the sun (ECEF axes); w: ambient light.
     sun: vec4<f32>,
-    // x: planet mean radius (m); y: atmosphere thickness (m); z: inscatter gain; w: exposure.
+    // x: planet equatorial radius (m); y: unused; z: inscatter gain; w: exposure.
     planet: vec4<f32>,
     // x, y: viewport size in pixels; z, w: 1 / size.
     viewport: vec4<f32>,
@@ -35,24 +36,6 @@ fn decode_oct(packed: u32) -> vec3<f32> {
     return normalize(n);
 }
 
-// Distance along a unit ray from a point `h` above the planet's sphere in the direction `up`
-// from its centre to where the ray enters (x) and leaves (y) the sphere of radius planet
-// radius + `shell_m`, computed from the height so that no large number is squared in f32.
-// Returns y < x when the ray misses.
-fn shell_span_from(up: vec3<f32>, h: f32, dir: vec3<f32>, shell_m: f32) -> vec2<f32> {
-    let r0 = frame.planet.x;
-    let r = r0 + h;
-    let b = r * dot(dir, up);
-    // r^2 - (r0 + shell)^2 = (h - shell) (2 r0 + h + shell)
-    let c = (h - shell_m) * (2.0 * r0 + h + shell_m);
-    let disc = b * b - c;
-    if (disc < 0.0) {
-        return vec2<f32>(1.0, -1.0);
-    }
-    let s = sqrt(disc);
-    return vec2<f32>(-b - s, -b + s);
-}
-
 // Whether the frame's camera is orthographic (its clip w is 1, not the depth).
 fn is_ortho() -> bool {
     return frame.clip_from_eye[3].w != 0.0;
@@ -65,9 +48,121 @@ fn ortho_forward() -> vec3<f32> {
     return normalize(far.xyz - near.xyz);
 }
 
-// Vertical optical depth of the whole atmosphere per colour channel (Rayleigh scattering is
-// about 5 times stronger in blue than in red).
-const VERTICAL_DEPTH: vec3<f32> = vec3<f32>(0.06, 0.13, 0.30);
+const PI: f32 = 3.14159265;
+
+// The body's air (mirrors `AtmosphereUniforms` in `globe.rs`; the model and its tables are
+// `globus_geo::Atmosphere`'s, marched here with the same formulas in f32). Everything about
+// the air is in the atmosphere's space: ECEF stretched per axis so that the body is the sphere
+// of its equatorial radius.
+struct Atmosphere {
+    // xyz: Rayleigh scattering at the ground, per metre; w: its scale height, metres.
+    rayleigh: vec4<f32>,
+    // x: Mie scattering and y: extinction at the ground, per metre; z: scale height, metres;
+    // w: asymmetry g.
+    mie: vec4<f32>,
+    // xyz: ozone absorption at the layer's peak, per metre; w: the peak's height, metres.
+    ozone: vec4<f32>,
+    // x: the sphere's radius; y: the air's thickness (0: no air); z: half the ozone layer's
+    // width; w: the distance from the ground to the top along the horizon. Metres.
+    shell: vec4<f32>,
+    // xyz: the per-axis stretch from ECEF; w: the Sun's illuminance (pi lights a white
+    // Lambertian ground facing it to 1).
+    stretch: vec4<f32>,
+}
+
+@group(0) @binding(1) var<uniform> atmosphere: Atmosphere;
+// Transmittance to the top of the air (Bruneton's layout, `TransmittanceLut`).
+@group(0) @binding(2) var transmittance_lut: texture_2d<f32>;
+// Multiply scattered light per unit scattering (`MultipleScatteringLut`).
+@group(0) @binding(3) var multiple_scattering_lut: texture_2d<f32>;
+@group(0) @binding(4) var lut_sampler: sampler;
+
+// Distance along a unit ray from a point `h` above the sphere in the direction `up` from its
+// centre to where the ray enters (x) and leaves (y) the sphere of radius sphere radius +
+// `shell_m`, computed from the height so that no large number is squared in f32. Returns
+// y < x when the ray misses.
+fn shell_span_from(up: vec3<f32>, h: f32, dir: vec3<f32>, shell_m: f32) -> vec2<f32> {
+    let r0 = atmosphere.shell.x;
+    let r = r0 + h;
+    let b = r * dot(dir, up);
+    // r^2 - (r0 + shell)^2 = (h - shell) (2 r0 + h + shell)
+    let c = (h - shell_m) * (2.0 * r0 + h + shell_m);
+    let disc = b * b - c;
+    if (disc < 0.0) {
+        return vec2<f32>(1.0, -1.0);
+    }
+    let s = sqrt(disc);
+    return vec2<f32>(-b - s, -b + s);
+}
+
+// A unit quantity to the texture coordinate that puts 0 and 1 on the first and last texels'
+// centres.
+fn lut_coord(unit: f32, size: f32) -> f32 {
+    return 0.5 / size + unit * (1.0 - 1.0 / size);
+}
+
+// Rayleigh, Mie and ozone densities (0..1) at `h` metres.
+fn air_densities(h: f32) -> vec3<f32> {
+    let hc = max(h, 0.0);
+    return vec3<f32>(
+        exp(-hc / atmosphere.rayleigh.w),
+        exp(-hc / atmosphere.mie.z),
+        max(1.0 - abs(hc - atmosphere.ozone.w) / atmosphere.shell.z, 0.0),
+    );
+}
+
+fn air_extinction(d: vec3<f32>) -> vec3<f32> {
+    return atmosphere.rayleigh.xyz * d.x + vec3<f32>(atmosphere.mie.y * d.y) + atmosphere.ozone.xyz * d.z;
+}
+
+// Transmittance from `h` metres along a ray of vertical cosine `mu` to the top of the air.
+fn transmittance_to_top(h: f32, mu: f32) -> vec3<f32> {
+    let r0 = atmosphere.shell.x;
+    let top = atmosphere.shell.y;
+    let horizon = atmosphere.shell.w;
+    let hc = clamp(h, 0.0, top);
+    let rho = sqrt(hc * (2.0 * r0 + hc));
+    let r = r0 + hc;
+    let c = (top - hc) * (2.0 * r0 + top + hc);
+    let d = max(-r * mu + sqrt(max(r * r * mu * mu + c, 0.0)), 0.0);
+    let d_min = top - hc;
+    let d_max = rho + horizon;
+    let x_mu = clamp((d - d_min) / (d_max - d_min), 0.0, 1.0);
+    let size = vec2<f32>(textureDimensions(transmittance_lut));
+    let uv = vec2<f32>(lut_coord(x_mu, size.x), lut_coord(rho / horizon, size.y));
+    return textureSampleLevel(transmittance_lut, lut_sampler, uv, 0.0).rgb;
+}
+
+// Sunlight reaching a point `h` metres up whose vertical has cosine `mu_s` with the Sun:
+// what the air lets through, faded out as the Sun's disc sets behind the body's horizon.
+fn sun_light(h: f32, mu_s: f32) -> vec3<f32> {
+    if (atmosphere.shell.y <= 0.0) {
+        return vec3<f32>(1.0);
+    }
+    let hc = max(h, 0.0);
+    let horizon_mu = -sqrt(hc * (2.0 * atmosphere.shell.x + hc)) / (atmosphere.shell.x + hc);
+    let visible = smoothstep(horizon_mu - SUN_HALF_WIDTH, horizon_mu + SUN_HALF_WIDTH, mu_s);
+    return transmittance_to_top(h, mu_s) * visible;
+}
+
+// Half the Sun's apparent width, as a cosine step near the horizon (radians).
+const SUN_HALF_WIDTH: f32 = 0.0046;
+
+// Multiply scattered light per unit scattering at `h` metres, Sun at vertical cosine `mu_s`.
+fn multiple_scattering(h: f32, mu_s: f32) -> vec3<f32> {
+    let size = f32(textureDimensions(multiple_scattering_lut).x);
+    let uv = vec2<f32>(
+        lut_coord(clamp(mu_s * 0.5 + 0.5, 0.0, 1.0), size),
+        lut_coord(clamp(h / atmosphere.shell.y, 0.0, 1.0), size),
+    );
+    return textureSampleLevel(multiple_scattering_lut, lut_sampler, uv, 0.0).rgb;
+}
+
+// The Sun's direction in the atmosphere's space.
+fn air_sun() -> vec3<f32> {
+    return normalize(frame.sun.xyz * atmosphere.stretch.xyz);
+}
+
 struct Air {
     // Light scattered towards the eye.
     inscatter: vec3<f32>,
@@ -75,15 +170,19 @@ struct Air {
     transmittance: vec3<f32>,
 }
 
-// The air between a point `h` above the planet's sphere (direction `up` from its centre) and
-// a point `dist` away along a unit ray (or the whole sky when `dist` is huge). The atmosphere
-// is a uniform shell `planet.y` thick, lit by the sun at the middle of the path; `planet.z`
-// scales the scattered light relative to the sunlit ground.
-fn air_from(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32) -> Air {
-    let thickness = frame.planet.y;
-    let span = shell_span_from(up, h, dir, thickness);
+// The air between a point `h` above the sphere (unit direction `up` from its centre) and a
+// point `dist` away along the unit ray `dir` (the sky beyond, when `dist` is huge), all in the
+// atmosphere's space, marched in `steps` (Hillaire 2020, equation 6's per-step integral):
+// sunlight singly scattered (Rayleigh and Cornette-Shanks phases, the body's shadow) and
+// multiply scattered (the table), scaled by `planet.z` relative to the sunlit ground.
+fn air_march(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32, steps: i32) -> Air {
+    let clear = Air(vec3<f32>(0.0), vec3<f32>(1.0));
+    if (atmosphere.shell.y <= 0.0) {
+        return clear;
+    }
+    let span = shell_span_from(up, h, dir, atmosphere.shell.y);
     if (span.y <= 0.0 || span.y < span.x) {
-        return Air(vec3<f32>(0.0), vec3<f32>(1.0));
+        return clear;
     }
     let ground = shell_span_from(up, h, dir, 0.0);
     var far = min(span.y, dist);
@@ -91,33 +190,90 @@ fn air_from(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32) -> Air {
         far = min(far, ground.x);
     }
     let near = max(span.x, 0.0);
-    let path = max(far - near, 0.0);
-    let depth = VERTICAL_DEPTH * (path / thickness);
-    let transmittance = exp(-depth);
-    let mid = up * (frame.planet.x + h) + dir * (0.5 * (near + far));
-    let sun_height = dot(normalize(mid), frame.sun.xyz);
-    let day = smoothstep(-0.2, 0.25, sun_height);
-    // Low sun: the light reaching the air has itself crossed much air and lost its blue.
-    let sun_colour = mix(vec3<f32>(1.0, 0.55, 0.3), vec3<f32>(1.0), smoothstep(0.0, 0.35, sun_height));
-    let inscatter = (vec3<f32>(1.0) - transmittance) * sun_colour * (frame.planet.z * (0.03 + 0.97 * day));
-    return Air(inscatter, transmittance);
+    if (far <= near) {
+        return clear;
+    }
+    let sun = air_sun();
+    let cos_theta = dot(dir, sun);
+    let rayleigh_phase = 3.0 / (16.0 * PI) * (1.0 + cos_theta * cos_theta);
+    let g = atmosphere.mie.w;
+    let mie_phase = 3.0 / (8.0 * PI) * (1.0 - g * g) / (2.0 + g * g) * (1.0 + cos_theta * cos_theta)
+        / pow(1.0 + g * g - 2.0 * g * cos_theta, 1.5);
+    let origin = up * (atmosphere.shell.x + h);
+    // Samples crowd towards the ray's lowest point, where the air is densest (the eye's end
+    // looking up, the ground's looking down, the tangent point along the limb): on each side
+    // of it the segments grow with the square of their index.
+    let lowest = clamp(-dot(origin, dir), near, far);
+    let before = lowest - near;
+    let after = far - lowest;
+    let tiny = 0.01 * (far - near);
+    var split = 0;
+    if (before > tiny) {
+        split = select(steps / 2, steps, after <= tiny);
+    }
+    var through = vec3<f32>(1.0);
+    var light = vec3<f32>(0.0);
+    for (var i = 0; i < steps; i = i + 1) {
+        var a: f32;
+        var b: f32;
+        if (i < split) {
+            let n = f32(split);
+            let k = f32(split - 1 - i);
+            a = lowest - before * ((k + 1.0) / n) * ((k + 1.0) / n);
+            b = lowest - before * (k / n) * (k / n);
+        } else {
+            let n = f32(steps - split);
+            let k = f32(i - split);
+            a = lowest + after * (k / n) * (k / n);
+            b = lowest + after * ((k + 1.0) / n) * ((k + 1.0) / n);
+        }
+        let dt = b - a;
+        let p = origin + dir * (0.5 * (a + b));
+        let r = length(p);
+        let hp = r - atmosphere.shell.x;
+        let mu_s = dot(p, sun) / r;
+        let d = air_densities(hp);
+        let rayleigh = atmosphere.rayleigh.xyz * d.x;
+        let mie = atmosphere.mie.x * d.y;
+        let source = sun_light(hp, mu_s) * (rayleigh * rayleigh_phase + vec3<f32>(mie * mie_phase))
+            + (rayleigh + vec3<f32>(mie)) * multiple_scattering(hp, mu_s);
+        let extinction = air_extinction(d);
+        let step = exp(-extinction * dt);
+        light = light + through * source * (vec3<f32>(1.0) - step) / max(extinction, vec3<f32>(1e-12));
+        through = through * step;
+    }
+    return Air(light * (atmosphere.stretch.w * frame.planet.z), through);
 }
 
-// The air between the eye and a point `dist` away along a unit ray.
-fn air(dir: vec3<f32>, dist: f32) -> Air {
-    return air_from(frame.eye_up_height.xyz, frame.eye_up_height.w, dir, dist);
+// The air between the eye and a point `dist` away along a unit ray (ECEF axes), or the sky
+// beyond when `dist` is huge.
+fn air(dir: vec3<f32>, dist: f32, steps: i32) -> Air {
+    let d = dir * atmosphere.stretch.xyz;
+    let k = length(d);
+    return air_march(frame.eye_up_height.xyz, frame.eye_up_height.w, d / k, dist * k, steps);
 }
 
-// The air along an orthographic camera's ray to a point at `eye_offset` from the eye: from
-// where the ray leaves the eye's plane, along the view.
-fn air_ortho(eye_offset: vec3<f32>) -> Air {
-    let f = ortho_forward();
-    let along = dot(eye_offset, f);
-    // The ray's start relative to the body's centre (the eye is planet radius + height
-    // along its up; the rest is small next to that).
-    let start = frame.eye_up_height.xyz * (frame.planet.x + frame.eye_up_height.w) + (eye_offset - f * along);
+// Where an orthographic camera's ray through `eye_offset` (ECEF axes, from the eye) leaves
+// the eye's plane, in the atmosphere's space: unit up (xyz) and height (w).
+fn ortho_start(eye_offset: vec3<f32>, forward: vec3<f32>) -> vec4<f32> {
+    let across = (eye_offset - forward * dot(eye_offset, forward)) * atmosphere.stretch.xyz;
+    let start = frame.eye_up_height.xyz * (atmosphere.shell.x + frame.eye_up_height.w) + across;
     let r = length(start);
-    return air_from(start / r, r - frame.planet.x, f, along);
+    return vec4<f32>(start / r, r - atmosphere.shell.x);
+}
+
+// The air along an orthographic camera's ray to a point at `eye_offset` from the eye (or the
+// sky beyond, when `sky`): from where the ray leaves the eye's plane, along the view.
+fn air_ortho(eye_offset: vec3<f32>, sky: bool, steps: i32) -> Air {
+    let f = ortho_forward();
+    let start = ortho_start(eye_offset, f);
+    let d = f * atmosphere.stretch.xyz;
+    let k = length(d);
+    var dist = 1e30;
+    if (!sky) {
+        dist = dot(eye_offset, f) * k;
+    }
+    return air_march(start.xyz, start.w, d / k, dist, steps);
 }
 
 // Filmic-ish tone curve so bright sunlit snow does not clip hard.

@@ -27,7 +27,6 @@ struct VsIn {
 @group(1) @binding(4) var night_lights: texture_2d<f32>;
 @group(1) @binding(5) var night_sampler: sampler;
 
-const PI: f32 = 3.14159265;
 // Sodium-lamp orange of city lights, and their brightness before tone mapping.
 const LIGHT_COLOUR: vec3<f32> = vec3<f32>(1.0, 0.72, 0.38);
 const LIGHT_GAIN: f32 = 2.5;
@@ -153,6 +152,9 @@ fn vs_main(v: VsIn) -> VsOut {
     return out;
 }
 
+// Samples along a ray from the eye to the ground.
+const GROUND_STEPS: i32 = 8;
+
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let texel = textureSample(colours, colour_sampler, in.uv, in.layer);
@@ -168,17 +170,22 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     if (is_ortho()) {
         view = -ortho_forward();
     }
+    // The sunlight that reaches this ground through the air (reddened and dimmed when low).
+    let ground = frame.eye_up_height.xyz * (atmosphere.shell.x + frame.eye_up_height.w)
+        + in.eye_offset * atmosphere.stretch.xyz;
+    let r = length(ground);
+    let sunlight = sun_light(r - atmosphere.shell.x, dot(ground, air_sun()) / r);
     // Sun glint on water (Blinn-Phong).
     let h = normalize(sun + view);
     let glint = water * pow(max(dot(n, h), 0.0), 200.0) * 0.35 * step(0.0, dot(n, sun));
-    var colour = albedo * (ambient + (1.0 - ambient) * diffuse) + vec3<f32>(glint)
+    var colour = albedo * (ambient + (1.0 - ambient) * diffuse * sunlight) + glint * sunlight
         + night_light(in.eye_offset, dist, texel.a);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
     var haze: Air;
     if (is_ortho()) {
-        haze = air_ortho(in.eye_offset);
+        haze = air_ortho(in.eye_offset, false, GROUND_STEPS);
     } else {
-        haze = air(-view, dist);
+        haze = air(-view, dist, GROUND_STEPS);
     }
     colour = colour * haze.transmittance + haze.inscatter;
     // Alpha 1 marks terrain coverage (read back by tests; forced opaque in saved images).

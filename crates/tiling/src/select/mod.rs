@@ -7,7 +7,8 @@
 //! 1. culls it if its oriented box is outside the view frustum, or its horizon culling point
 //!    is hidden behind the occluder ellipsoid (both tests are conservative);
 //! 2. computes its screen-space error
-//!    `sse = geometric_error * viewport_height / (distance * 2 tan(fov_y / 2))`;
+//!    `sse = geometric_error * viewport_height / (distance * 2 tan(fov_y / 2))`, times the
+//!    share of contrast the air lets through from the tile to the eye when there is fog;
 //! 3. draws it if `sse <= max_sse_px`, or if it has no finer data;
 //! 4. otherwise refines: when every child that is not culled is loaded, it descends into them;
 //!    when some are not, it draws this tile (the loaded ancestor) and requests the missing
@@ -26,7 +27,7 @@ mod oracle;
 
 pub use oracle::{TileInfo, TileOracle, TileState};
 
-use globus_geo::{Ellipsoid, EllipsoidalOccluder, Frustum, Intersection, View};
+use globus_geo::{Atmosphere, Ellipsoid, EllipsoidalOccluder, Frustum, Intersection, View};
 
 use crate::{TileBounds, TileKey};
 
@@ -41,6 +42,11 @@ pub struct SelectionOptions {
     pub near_m: f64,
     /// No tile deeper than this is selected or requested.
     pub max_level: u8,
+    /// Air whose haze lowers the detail needed (CesiumJS's fog, from the physical model):
+    /// a tile's error counts times the contrast the air between the eye and the tile's
+    /// nearest point lets through ([`Atmosphere::contrast_kept`]), so the error a viewer can
+    /// see stays within the bound. `None`: no fog.
+    pub fog: Option<Atmosphere>,
 }
 
 impl Default for SelectionOptions {
@@ -50,6 +56,7 @@ impl Default for SelectionOptions {
             occluder: Ellipsoid::WGS84,
             near_m: 0.1,
             max_level: TileKey::MAX_LEVEL,
+            fog: None,
         }
     }
 }
@@ -207,7 +214,15 @@ impl<O: TileOracle> Walk<'_, O> {
         let px_per_m = self
             .ortho_px_per_m
             .unwrap_or(self.sse_factor / distance_m.max(1e-6));
-        let sse_px = info.geometric_error_m * px_per_m;
+        let mut sse_px = info.geometric_error_m * px_per_m;
+        // Only an error that would refine is worth the march (the fog only lowers it), and
+        // only if the least the air can keep over the distance might bring it under.
+        if sse_px > self.options.max_sse_px
+            && let Some(air) = &self.options.fog
+            && sse_px * (-air.clearest_extinction() * distance_m).exp() <= self.options.max_sse_px
+        {
+            sse_px *= air.contrast_kept(self.eye, info.bounds.obb.closest_point(self.eye));
+        }
         let can_refine = info.has_children && key.level() < self.options.max_level;
         (
             distance_m,
