@@ -441,6 +441,60 @@ fn render_writes_a_png_and_stats() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `--atmosphere none` takes the air away (a black sky over the ground), the default draws
+/// the Earth's (a blue one), `--no-fog` is accepted, and an unknown air is refused.
+#[test]
+fn render_draws_the_air_unless_told_there_is_none() {
+    let dir = common::scratch("cli", "atmosphere");
+    let sky = |extra: &[&str], name: &str| {
+        let png = dir.join(name);
+        let mut args = vec![
+            "render",
+            "--camera",
+            "7.6,46,500,0,30",
+            "--above-ground",
+            "--size",
+            "96x64",
+            "--out",
+            png.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let out = globus(&args);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let img = image::open(&png).expect("a PNG").to_rgba8();
+        // The top middle of the picture: 60 degrees up.
+        img.get_pixel(48, 2).0
+    };
+    let blue = sky(&["--no-fog"], "earth.png");
+    let black = sky(&["--atmosphere", "none"], "none.png");
+    assert!(
+        blue[2] > 60 && blue[2] > blue[0],
+        "the Earth's sky {blue:?}"
+    );
+    assert!(
+        u32::from(black[0]) + u32::from(black[1]) + u32::from(black[2]) < 15,
+        "no air {black:?}"
+    );
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "8x8",
+            "--out",
+            "x.png",
+            "--atmosphere",
+            "mars",
+        ],
+        &["--atmosphere", "mars"],
+    );
+}
+
 /// A CR/LF in a header from the config split every request and panicked the loader threads
 /// (the run exited 0 without terrain): now refused when the config is read.
 #[test]
