@@ -127,8 +127,9 @@ fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
     if (hits_ground) {
         through = vec3<f32>(0.0);
     }
-    // The Sun's disc, through the air between it and the eye.
-    let disc = smoothstep(0.9995, 0.9998, dot(dir, frame.sun.xyz));
+    // The Sun's disc (0.53 degree across, softened over as much again outside), through the
+    // air between it and the eye.
+    let disc = smoothstep(0.99996, 0.999989, dot(dir, frame.sun.xyz));
     let sun = vec3<f32>(disc * 3.0) * through;
     return vec4<f32>(tone(space * through + sky + sun), 0.0);
 }
