@@ -215,23 +215,22 @@ impl Globe {
         );
         let slots = memory.map_or(settings.gpu_slots, |m| m.gpu_slots);
         let pool = TilePool::new(device, settings.pool_options(slots));
-        let mut selection_options = SelectionOptions {
+        let selection_options = SelectionOptions {
             max_sse_px: settings.max_sse_px,
             occluder: *layer.occluder(),
             near_m: 0.01,
             max_level: layer.max_level(),
-            fog: None,
+            fog: None, // update_fog
         };
         let formats = FrameFormats::new(colour_format);
         let atmosphere = builder.atmosphere_over(layer.ellipsoid());
-        selection_options.fog = (builder.fog_on() && !atmosphere.is_none()).then_some(atmosphere);
         tracing::debug!(
             source = layer.source().name(),
             slots,
             cache_bytes = layer.cache_bytes().1,
             "globe built"
         );
-        Ok(Self {
+        let mut globe = Self {
             device: device.clone(),
             queue: queue.clone(),
             layer,
@@ -270,7 +269,9 @@ impl Globe {
             } else {
                 NEAR_PLANE_CAP_M
             },
-        })
+        };
+        globe.update_fog();
+        Ok(globe)
     }
 
     /// The body the globe is on.

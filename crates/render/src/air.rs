@@ -10,6 +10,8 @@ use std::sync::{Arc, Mutex};
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{Atmosphere, AtmosphereTables};
 
+use crate::globe::{fragment_sampler, fragment_texture};
+
 /// The Sun's illuminance in the shaders' units: pi lights a white Lambertian ground facing
 /// it to 1, as the terrain's diffuse term does.
 pub(crate) const SUN_ILLUMINANCE: f32 = std::f32::consts::PI;
@@ -116,16 +118,6 @@ impl AirResources {
 
     /// Layout entries for bindings 1-4 of the frame group.
     pub(crate) fn layout_entries() -> [wgpu::BindGroupLayoutEntry; 4] {
-        let texture = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
         [
             wgpu::BindGroupLayoutEntry {
                 binding: 1,
@@ -139,14 +131,9 @@ impl AirResources {
                 },
                 count: None,
             },
-            texture(2),
-            texture(3),
-            wgpu::BindGroupLayoutEntry {
-                binding: 4,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            },
+            fragment_texture(2, wgpu::TextureViewDimension::D2),
+            fragment_texture(3, wgpu::TextureViewDimension::D2),
+            fragment_sampler(4),
         ]
     }
 
