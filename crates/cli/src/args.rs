@@ -138,6 +138,10 @@ pub struct GlobeArgs {
     /// times the contrast the air lets through, as CesiumJS's fog does).
     #[arg(long)]
     pub no_fog: bool,
+    /// Replace a tile by its children in one frame (by default they grow out of its surface
+    /// and colour as they come into their level of detail: no popping).
+    #[arg(long)]
+    pub no_morph: bool,
 }
 
 #[derive(Args)]
@@ -534,6 +538,7 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
         None => {}
     }
     builder.fog(!a.no_fog);
+    builder.morph(!a.no_morph);
     if let Some(path) = &a.night_imagery {
         builder.night_lights(Some(std::sync::Arc::new(night_lights(path)?)));
     }

@@ -442,7 +442,8 @@ fn render_writes_a_png_and_stats() {
 }
 
 /// `--atmosphere none` takes the air away (a black sky over the ground), the default draws
-/// the Earth's (a blue one), `--no-fog` is accepted, and an unknown air is refused.
+/// the Earth's (a blue one), `--no-fog` and `--no-morph` are accepted, and an unknown air is
+/// refused.
 #[test]
 fn render_draws_the_air_unless_told_there_is_none() {
     let dir = common::scratch("cli", "atmosphere");
@@ -469,7 +470,7 @@ fn render_draws_the_air_unless_told_there_is_none() {
         // The top middle of the picture: 60 degrees up.
         img.get_pixel(48, 2).0
     };
-    let blue = sky(&["--no-fog"], "earth.png");
+    let blue = sky(&["--no-fog", "--no-morph"], "earth.png");
     let black = sky(&["--atmosphere", "none"], "none.png");
     assert!(
         blue[2] > 60 && blue[2] > blue[0],

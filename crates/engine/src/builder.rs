@@ -74,6 +74,7 @@ pub struct GlobeBuilder {
     night_lights: Option<Arc<NightLights>>,
     atmosphere: Option<Atmosphere>,
     fog: bool,
+    morph: bool,
 }
 
 impl Default for GlobeBuilder {
@@ -103,6 +104,7 @@ impl Default for GlobeBuilder {
             night_lights: None,
             atmosphere: None,
             fog: true,
+            morph: true,
         }
     }
 }
@@ -229,6 +231,18 @@ impl GlobeBuilder {
     /// Whether [`GlobeBuilder::fog`] is on.
     pub(crate) fn fog_on(&self) -> bool {
         self.fog
+    }
+
+    /// Whether tiles grow out of their parents' surfaces and colours instead of replacing
+    /// them in one frame (default on; see [`crate::Globe::set_morph`]).
+    pub fn morph(&mut self, on: bool) -> &mut Self {
+        self.morph = on;
+        self
+    }
+
+    /// Whether [`GlobeBuilder::morph`] is on.
+    pub(crate) fn morph_on(&self) -> bool {
+        self.morph
     }
 
     /// The night lights, if set.

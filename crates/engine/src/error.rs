@@ -2,6 +2,8 @@
 //! asked something, each naming what failed. A message that quotes its cause does not also
 //! return it as `source()`: a chain printed whole (`{:#}`) says each thing once.
 
+use std::time::Duration;
+
 /// Why a globe could not be built, or a request to it failed.
 #[derive(Debug, thiserror::Error)]
 pub enum EngineError {
@@ -70,6 +72,16 @@ pub enum EngineError {
     /// The GPU could not do what was asked (no adapter, a failed readback).
     #[error(transparent)]
     Render(#[from] globus_render::RenderError),
+    /// A measurement needed complete frames and the tiles did not all load in time.
+    #[error("tiles still loading after {timeout:?}: frame {frame} of {what}")]
+    Incomplete {
+        /// What was measured.
+        what: &'static str,
+        /// The frame that was not complete.
+        frame: u32,
+        /// How long it waited.
+        timeout: Duration,
+    },
 }
 
 /// "terrain URL: why", or "terrain why" when the reason already names the URL (an

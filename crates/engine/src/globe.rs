@@ -27,7 +27,7 @@ use globus_render::{
 };
 use globus_stream::{LayerStats, TerrainLayer, TerrainLayerOptions, TerrainSource};
 use globus_tiling::quality::QualityLoop;
-use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, TileKey, select_into};
+use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, select_into};
 
 use crate::builder::Settings;
 use crate::frame::plan::{FramePlan, Motion};
@@ -239,6 +239,7 @@ impl Globe {
                 renderer.set_atmosphere(device, queue, atmosphere);
                 renderer.set_night_lights(device, queue, builder.night_lights_ref());
                 renderer.set_procedural_lights(!builder.uses_real_data());
+                renderer.set_morph(builder.morph_on());
                 renderer
             },
             formats,
@@ -363,6 +364,23 @@ impl Globe {
     pub fn set_fog(&mut self, on: bool) {
         self.fog = on;
         self.update_fog();
+    }
+
+    /// Whether tiles grow out of their parents (on by default): a tile that replaces its
+    /// parent starts from the parent's surface, normals and colour and blends into its own
+    /// as its level of detail's range runs out (geomorphing, by the fraction selection gives
+    /// each drawn tile, [`globus_tiling::DrawTile::morph`]), so splits and merges never move
+    /// a pixel in one frame. Off, each tile shows its own at once.
+    pub fn set_morph(&mut self, on: bool) {
+        self.renderer.set_morph(on);
+    }
+
+    /// How long a tile's own imagery takes to replace the ancestor's it showed while it
+    /// loaded (200 ms by default, [`globus_render::COLOUR_FADE`]; zero: at once). Frames that
+    /// must settle ([`Globe::load_completely`]) show their own imagery at once whatever this
+    /// says.
+    pub fn set_colour_fade(&mut self, duration: Duration) {
+        self.renderer.set_colour_fade(duration);
     }
 
     fn update_fog(&mut self) {
@@ -550,7 +568,6 @@ impl Globe {
             .lighting
             .unwrap_or_else(|| Self::default_lighting(view, &ellipsoid));
         self.sun_direction = lighting.sun_direction;
-        let tiles: Vec<TileKey> = self.selection.draw.iter().map(|d| d.key).collect();
         let draw = self.renderer.prepare(
             &self.device,
             &self.queue,
@@ -558,7 +575,7 @@ impl Globe {
                 camera: &camera,
                 ellipsoid,
                 lighting,
-                tiles: &tiles,
+                tiles: &self.selection.draw,
             },
         );
         self.over_triangles = self.max_triangles.is_some_and(|m| draw.triangles > m);
@@ -648,6 +665,7 @@ impl Globe {
             drawn: &self.selection.draw,
             layer: &self.layer,
             terrain_depth: targets.terrain_depth_view(),
+            morph: self.renderer.morph(),
             sun_direction: self.sun_direction,
             screen_boxes: Default::default(),
         };
@@ -767,16 +785,19 @@ impl Globe {
         // view always settles on the same tiles.
         self.selection_options.max_sse_px = self.settings.max_sse_px;
         self.relax_detail = false;
+        // A settled frame shows every tile's own imagery, not a fade towards it.
+        let fade = self.renderer.colour_fade();
+        self.renderer.set_colour_fade(Duration::ZERO);
         let mut stalled = 0;
-        loop {
+        let settled = loop {
             let sse_before = self.selection_options.max_sse_px;
             let report = self.update(view);
             on_frame(&report);
             if report.is_complete() {
-                return (report, true);
+                break (report, true);
             }
             if Instant::now() > deadline {
-                return (report, false);
+                break (report, false);
             }
             let progress = report.pool.uploaded_this_frame > 0 || report.sse_bound_px != sse_before;
             // Wait for tiles only if nothing could be uploaded this frame.
@@ -785,14 +806,16 @@ impl Globe {
                 if idle && report.layer.arrived == 0 && report.layer.colours_arrived == 0 {
                     stalled += 1;
                     if stalled > 3 {
-                        return (report, false);
+                        break (report, false);
                     }
                 }
                 self.layer.wait_for_tiles(Duration::from_millis(200));
             } else {
                 stalled = 0;
             }
-        }
+        };
+        self.renderer.set_colour_fade(fade);
+        settled
     }
 }
 

@@ -185,6 +185,60 @@ pub fn frame_change(before: &RgbaImage, after: &RgbaImage, threshold: u8) -> Opt
     })
 }
 
+/// One frame of [`Headless::sweep_error_bound`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SweepFrame {
+    /// The error bound it was drawn with, pixels.
+    pub sse_bound_px: f64,
+    /// Tiles drawn.
+    pub tiles: u32,
+    /// The deepest level drawn.
+    pub max_level: u8,
+    /// How the picture changed from the frame before (`None` for the first).
+    pub change: Option<FrameChange>,
+}
+
+impl Headless {
+    /// The popping measurement (issue 20): with the camera still at `view`, lowers the error
+    /// bound geometrically from `from_px` to `to_px` over `steps` frames after the first,
+    /// each loaded completely before it is drawn (within `timeout`), so that what changes
+    /// between two frames is only what the finer bound split; a channel change above
+    /// `visible` (of 255) counts as visible. Fails if a frame does not finish loading.
+    pub fn sweep_error_bound(
+        &mut self,
+        view: &View,
+        (from_px, to_px): (f64, f64),
+        steps: u32,
+        visible: u8,
+        timeout: Duration,
+    ) -> Result<Vec<SweepFrame>, EngineError> {
+        let mut frames = Vec::with_capacity(steps as usize + 1);
+        let mut before: Option<RgbaImage> = None;
+        for step in 0..=steps {
+            let bound = from_px * (to_px / from_px).powf(f64::from(step) / f64::from(steps.max(1)));
+            self.globe.set_error_bound_px(bound)?;
+            let frame = self.render_complete(view, timeout, &mut [])?;
+            if !frame.complete {
+                return Err(EngineError::Incomplete {
+                    what: "the error-bound sweep",
+                    frame: step,
+                    timeout,
+                });
+            }
+            frames.push(SweepFrame {
+                sse_bound_px: frame.report.sse_bound_px,
+                tiles: frame.report.selection.selected,
+                max_level: frame.report.selection.max_level,
+                change: before
+                    .as_ref()
+                    .and_then(|b| frame_change(b, &frame.image, visible)),
+            });
+            before = Some(frame.image);
+        }
+        Ok(frames)
+    }
+}
+
 /// See [`frame_change`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameChange {

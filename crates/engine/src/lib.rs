@@ -78,7 +78,9 @@ pub use controller::{CameraController, Ground, ORTHO_EYE_HEIGHT_M};
 pub use error::EngineError;
 pub use globe::{FrameReport, Globe, MemoryUse, Pick};
 pub use globus_vector::{Feature, StyleRules};
-pub use headless::{FrameChange, Headless, RenderedFrame, frame_change, holes_inside, save_png};
+pub use headless::{
+    FrameChange, Headless, RenderedFrame, SweepFrame, frame_change, holes_inside, save_png,
+};
 pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};
 pub use traffic::{Follow, TrafficLayer, TrafficStats, TrafficStyle};

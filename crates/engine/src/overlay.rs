@@ -26,7 +26,7 @@
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_render::{FrameCamera, FrameFormats};
 use globus_stream::TerrainLayer;
-use globus_terrain::TileMesh;
+use globus_terrain::{MorphVertex, TileMesh};
 use globus_tiling::{DrawTile, GeoRect, TileKey};
 
 /// One of the passes overlays draw in, in drawing order.
@@ -65,6 +65,8 @@ pub struct FrameContext<'a> {
     pub(crate) drawn: &'a [DrawTile],
     pub(crate) layer: &'a TerrainLayer,
     pub(crate) terrain_depth: &'a wgpu::TextureView,
+    /// Whether tiles grow out of their parents this frame ([`crate::Globe::set_morph`]).
+    pub(crate) morph: bool,
     pub(crate) sun_direction: DVec3,
     /// Screen boxes overlays prepared earlier this frame drew labels and symbols in.
     pub(crate) screen_boxes: std::cell::RefCell<Vec<[f32; 4]>>,
@@ -124,6 +126,19 @@ impl FrameContext<'_> {
     /// to its centre, exaggerated, surface triangles first.
     pub fn tile_mesh(&self, key: TileKey) -> Option<&TileMesh> {
         self.layer.get(key).map(|d| &d.mesh)
+    }
+
+    /// Where the vertices of a loaded tile's mesh ([`FrameContext::tile_mesh`]) lie on its
+    /// parent's surface, one per vertex (empty: it has none to grow out of): what draped
+    /// geometry needs to follow the terrain's geomorphing.
+    pub fn tile_morph_targets(&self, key: TileKey) -> Vec<MorphVertex> {
+        crate::frame::upload::morph_targets(self.layer, key)
+    }
+
+    /// How far a drawn tile has grown out of its parent this frame: its
+    /// [`DrawTile::morph`], or 1 (its own surface) with geomorphing off.
+    pub fn morph_of(&self, tile: &DrawTile) -> f64 {
+        if self.morph { tile.morph } else { 1.0 }
     }
 
     /// A loaded tile's rectangle (radians).

@@ -70,10 +70,6 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     builder
         .terrain(SourceSpec::parse(&server.url("/topo")).expect("spec"))
         .imagery(SourceSpec::parse(&server.url("/bmng")).expect("spec"));
-    // Without fog: with it this view wants fewer level-1 tiles, and about one run in six the
-    // broken tile is then asked twice (its failure counted twice, `failed: 2`), a request
-    // race in the scheduler not yet found (stop 33's note); the faults are what this tests.
-    builder.fog(false);
     let (w, h) = (640, 360);
     let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the sources");
     let cam = CameraSpec {
@@ -137,16 +133,26 @@ fn the_real_earth_streams_over_http_through_faults_and_completes() {
     // Every fault was met: the transient ones got past (the visible tiles they hit were
     // asked again after them, by their own loads' retries: a neighbour reading its normal
     // ring across the edge never retries), the broken tile failed once and for all (asked
-    // once: a ring read and the tile's own load share one request and its outcome), and its
-    // ancestor filled its place in the complete picture above. Only the broken tile failed,
-    // so the others' data arrived.
+    // once: a ring read and the tiles' own loads share one request and its outcome), and
+    // its ancestor filled its place in the complete picture above. Only the engine tiles
+    // that read the broken one failed, so the others' data arrived: the four level-2 tiles
+    // under it (a 256-pixel source tile feeds 128-sample engine tiles a level deeper). Most
+    // runs count one, as the first failure blocks their parent's refinement and the others'
+    // loads are cancelled; sometimes a second fails before it is (stop 33 took that for a
+    // scheduler race: the server's count shows the source tile asked once all the same).
     let stats = off.globe().layer().scheduler_stats();
     assert!(stats.retries >= 1, "{stats:?}");
     // A failed tile still wanted is asked again after its 30 s cool-down (the pyramid
     // answers from its cache without a request), which a loaded CI machine can reach.
     let cool_downs = (frame.load_ms / 30_000.0).floor() as u64;
+    assert_eq!(
+        server.count("/topo/1/2/0.png") as u64,
+        1 + cool_downs,
+        "the broken tile asked once ({} ms)",
+        frame.load_ms
+    );
     assert!(
-        (1..=1 + cool_downs).contains(&stats.failed),
+        (1..=4 * (1 + cool_downs)).contains(&stats.failed),
         "{stats:?} in {} ms",
         frame.load_ms
     );

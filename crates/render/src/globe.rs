@@ -12,16 +12,18 @@
 //!    whole, or an ancestor's cropped while its own imagery loads).
 
 use std::mem::size_of;
+use std::time::{Duration, Instant};
 
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{Atmosphere, DVec3, Ellipsoid};
 use globus_terrain::TerrainVertex;
-use globus_tiling::TileKey;
+use globus_tiling::DrawTile;
 
 use crate::air::AirResources;
 use crate::camera::FrameCamera;
+use crate::fade::ColourFades;
 use crate::night::NightLights;
-use crate::pool::TilePool;
+use crate::pool::{ColourSource, TilePool, VertexExtra};
 use crate::shaders;
 use crate::target::{DEPTH_FORMAT, FrameFormats};
 
@@ -95,8 +97,10 @@ pub struct FrameInputs<'a> {
     pub ellipsoid: Ellipsoid,
     /// Sun and air.
     pub lighting: Lighting,
-    /// Tiles to draw; each must be resident in the pool (others are skipped and counted).
-    pub tiles: &'a [TileKey],
+    /// Tiles to draw, with how far each has grown out of its parent
+    /// ([`DrawTile::morph`]); each must be resident in the pool (others are skipped and
+    /// counted).
+    pub tiles: &'a [DrawTile],
 }
 
 /// What a frame cost.
@@ -117,6 +121,43 @@ pub struct DrawStats {
     pub missing_colour: u32,
 }
 
+/// Per slot: where the tile's colour and its parent's are, and how far it has grown out of
+/// its parent (`TileMap` in `terrain.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+struct TileMap {
+    /// uv scale (u, v) and offset (u, v) of the tile in its colour layer.
+    colour: [f32; 4],
+    /// The same in the layer its parent shows.
+    parent_colour: [f32; 4],
+    /// How far the tile has grown out of its parent (0 to 1), the parent colour's layer, and
+    /// how much of its own colour shows over the parent's (0 to 1).
+    morph: [f32; 4],
+}
+
+impl Default for TileMap {
+    fn default() -> Self {
+        Self {
+            colour: [1.0, 1.0, 0.0, 0.0],
+            parent_colour: [1.0, 1.0, 0.0, 0.0],
+            morph: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// A colour source as the shader reads it: uv scale and offset, and the layer.
+fn map_of(c: ColourSource) -> ([f32; 4], u32) {
+    (
+        [
+            c.scale[0] as f32,
+            c.scale[1] as f32,
+            c.offset[0] as f32,
+            c.offset[1] as f32,
+        ],
+        c.layer,
+    )
+}
+
 /// Pipelines and per-frame buffers for drawing the globe.
 pub struct GlobeRenderer {
     frame_buffer: wgpu::Buffer,
@@ -131,9 +172,13 @@ pub struct GlobeRenderer {
     sky_view: SkyView,
     offset_buffer: wgpu::Buffer,
     offsets: Vec<[f32; 4]>,
-    colour_map_buffer: wgpu::Buffer,
-    /// Per slot: uv scale, uv offset (u, v) and colour layer.
-    colour_maps: Vec<[f32; 4]>,
+    tile_map_buffer: wgpu::Buffer,
+    /// Per slot, as `TileMap` in `terrain.wgsl`.
+    tile_maps: Vec<TileMap>,
+    /// Whether tiles grow out of their parents (else each shows its own surface at once).
+    morph: bool,
+    /// Own imagery fading in over its ancestor's.
+    fades: ColourFades,
     indirect_buffer: wgpu::Buffer,
     indirect_capacity: u32,
     draws: Vec<DrawIndexedArgs>,
@@ -209,9 +254,9 @@ impl GlobeRenderer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let colour_map_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("tile colour maps"),
-            size: u64::from(slots) * 16,
+        let tile_map_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("tile colour maps and morphs"),
+            size: u64::from(slots) * size_of::<TileMap>() as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -238,8 +283,10 @@ impl GlobeRenderer {
             sky_view,
             offset_buffer,
             offsets: vec![[0.0; 4]; slots as usize],
-            colour_map_buffer,
-            colour_maps: vec![[1.0, 1.0, 0.0, 0.0]; slots as usize],
+            tile_map_buffer,
+            tile_maps: vec![TileMap::default(); slots as usize],
+            morph: true,
+            fades: ColourFades::new(slots),
             indirect_buffer,
             indirect_capacity,
             draws: Vec::new(),
@@ -273,6 +320,28 @@ impl GlobeRenderer {
     /// The air drawn.
     pub fn atmosphere(&self) -> &Atmosphere {
         &self.air.atmosphere
+    }
+
+    /// Whether tiles grow out of their parents' surfaces and colours as they come into their
+    /// level of detail ([`DrawTile::morph`]; on by default), or show their own at once.
+    pub fn set_morph(&mut self, on: bool) {
+        self.morph = on;
+    }
+
+    /// How long a tile's own imagery takes to replace the ancestor's it showed while it
+    /// loaded ([`crate::COLOUR_FADE`] by default); zero: at once (frames that must settle).
+    pub fn set_colour_fade(&mut self, duration: Duration) {
+        self.fades.set_duration(duration);
+    }
+
+    /// See [`GlobeRenderer::set_colour_fade`].
+    pub fn colour_fade(&self) -> Duration {
+        self.fades.duration()
+    }
+
+    /// Whether tiles grow out of their parents ([`GlobeRenderer::set_morph`]).
+    pub fn morph(&self) -> bool {
+        self.morph
     }
 
     /// Draws procedural towns on the night side's land (for a procedural planet), unless
@@ -356,7 +425,9 @@ impl GlobeRenderer {
         let mut borrowed_colour = 0;
         let mut missing_colour = 0;
         let mut triangles = 0u64;
-        for &key in inputs.tiles {
+        let now = Instant::now();
+        for tile in inputs.tiles {
+            let key = tile.key;
             let Some(r) = self.pool.resident(key) else {
                 missing += 1;
                 continue;
@@ -364,26 +435,29 @@ impl GlobeRenderer {
             // The one place a planet-sized number becomes f32: after the f64 subtraction.
             let offset = (r.centre - view.position).as_vec3();
             let slot = r.slot;
-            let (map, layer) = match self.pool.colour_source(key) {
-                Some(c) => {
-                    borrowed_colour += u32::from(c.from != key);
-                    (
-                        [
-                            c.scale[0] as f32,
-                            c.scale[1] as f32,
-                            c.offset[0] as f32,
-                            c.offset[1] as f32,
-                        ],
-                        c.layer,
-                    )
-                }
-                None => {
-                    missing_colour += 1;
-                    ([1.0, 1.0, 0.0, 0.0], slot)
-                }
-            };
+            let own = self.pool.colour_source(key);
+            match own {
+                Some(c) => borrowed_colour += u32::from(c.from != key),
+                None => missing_colour += 1,
+            }
+            let (map, layer) = own.map_or(([1.0, 1.0, 0.0, 0.0], slot), map_of);
+            let morph = if self.morph { tile.morph as f32 } else { 1.0 };
+            // The colour grows with the surface, and a tile's own imagery that has just
+            // replaced its ancestor's fades in over it.
+            let has_own = own.is_some_and(|c| c.from == key);
+            let colour_share = morph * self.fades.own_share(slot, key, has_own, now);
+            // Without a parent's colour to fade from, the tile's own stands in.
+            let (parent_map, parent_layer) = self
+                .pool
+                .parent_colour_source(key)
+                .filter(|_| colour_share < 1.0)
+                .map_or((map, layer), map_of);
             self.offsets[slot as usize] = [offset.x, offset.y, offset.z, layer as f32];
-            self.colour_maps[slot as usize] = map;
+            self.tile_maps[slot as usize] = TileMap {
+                colour: map,
+                parent_colour: parent_map,
+                morph: [morph, parent_layer as f32, colour_share, 0.0],
+            };
             let index_count = r.indices.len() as u32;
             triangles += u64::from(index_count / 3);
             self.draws.push(DrawIndexedArgs {
@@ -405,9 +479,9 @@ impl GlobeRenderer {
         if !self.draws.is_empty() {
             queue.write_buffer(&self.offset_buffer, 0, bytemuck::cast_slice(&self.offsets));
             queue.write_buffer(
-                &self.colour_map_buffer,
+                &self.tile_map_buffer,
                 0,
-                bytemuck::cast_slice(&self.colour_maps),
+                bytemuck::cast_slice(&self.tile_maps),
             );
             queue.write_buffer(&self.indirect_buffer, 0, bytemuck::cast_slice(&self.draws));
         }
@@ -480,7 +554,7 @@ impl GlobeRenderer {
                 },
                 wgpu::BindGroupEntry {
                     binding: 3,
-                    resource: self.colour_map_buffer.as_entire_binding(),
+                    resource: self.tile_map_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
@@ -635,7 +709,9 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 /// Vertex streams: [`TerrainVertex`] from the pool, and the slot of each vertex.
 const TERRAIN_VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Unorm16x2];
-const SLOT_ATTRIBUTES: [wgpu::VertexAttribute; 1] = wgpu::vertex_attr_array![3 => Uint32];
+/// [`VertexExtra`]: slot, morph height and the parent's normal.
+const EXTRA_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
+    wgpu::vertex_attr_array![3 => Uint32, 4 => Float32, 5 => Uint32];
 
 fn terrain_pipeline(
     device: &wgpu::Device,
@@ -666,9 +742,9 @@ fn terrain_pipeline(
                     attributes: &TERRAIN_VERTEX_ATTRIBUTES,
                 }),
                 Some(wgpu::VertexBufferLayout {
-                    array_stride: 4,
+                    array_stride: size_of::<VertexExtra>() as u64,
                     step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &SLOT_ATTRIBUTES,
+                    attributes: &EXTRA_ATTRIBUTES,
                 }),
             ],
         },
@@ -875,7 +951,7 @@ impl SkyView {
 mod tests {
     use std::mem::{offset_of, size_of};
 
-    use super::FrameUniforms;
+    use super::{FrameUniforms, TileMap};
     use crate::air::AtmosphereUniforms;
 
     /// The size and member offsets of the WGSL struct `name` as naga lays it out.
@@ -898,11 +974,21 @@ mod tests {
         }
     }
 
+    /// Checks a struct both shaders declare.
     fn check(name: &str, size: usize, offsets: &[(&str, usize)]) {
-        for (shader, source) in [
-            ("terrain", crate::shaders::TERRAIN),
-            ("sky", crate::shaders::SKY),
-        ] {
+        check_in(
+            &[
+                ("terrain", crate::shaders::TERRAIN),
+                ("sky", crate::shaders::SKY),
+            ],
+            name,
+            size,
+            offsets,
+        );
+    }
+
+    fn check_in(shaders: &[(&str, &str)], name: &str, size: usize, offsets: &[(&str, usize)]) {
+        for &(shader, source) in shaders {
             let (span, members) = wgsl_layout(source, name);
             assert_eq!(span as usize, size, "{shader}: {name}'s size");
             let got: Vec<(&str, usize)> = members
@@ -938,6 +1024,16 @@ mod tests {
                 ("ozone", offset_of!(AtmosphereUniforms, ozone)),
                 ("shell", offset_of!(AtmosphereUniforms, shell)),
                 ("stretch", offset_of!(AtmosphereUniforms, stretch)),
+            ],
+        );
+        check_in(
+            &[("terrain", crate::shaders::TERRAIN)],
+            "TileMap",
+            size_of::<TileMap>(),
+            &[
+                ("colour", offset_of!(TileMap, colour)),
+                ("parent_colour", offset_of!(TileMap, parent_colour)),
+                ("morph", offset_of!(TileMap, morph)),
             ],
         );
     }

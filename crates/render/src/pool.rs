@@ -5,8 +5,9 @@
 //!   (adaptive cuts keep 12 to 1221 vertices of a tile) pack together and one
 //!   `multi_draw_indexed_indirect` draws them all. Indices are tile-local; the draw's base
 //!   vertex points at the tile's range.
-//! * A parallel per-vertex buffer of slot numbers: the vertex shader finds its tile's
-//!   centre-to-eye offset and colour layer from it (portable: no first-instance feature).
+//! * A parallel per-vertex buffer ([`VertexExtra`]): the slot number, from which the vertex
+//!   shader finds its tile's centre-to-eye offset and colour layer (portable: no
+//!   first-instance feature), and the vertex's morph target on its parent's surface.
 //! * One 2D texture array with one layer (full mip chain) per slot for colour. A tile may be
 //!   resident before its own colour (imagery that loads on its own): it then reads the layer
 //!   of its nearest resident ancestor that has its own, cropped and scaled to its rectangle
@@ -20,9 +21,10 @@
 use std::mem::size_of;
 use std::ops::Range;
 
+use bytemuck::{Pod, Zeroable};
 use globus_geo::DVec3;
 use globus_terrain::grid::COLOUR_SIZE;
-use globus_terrain::{ColourImage, TerrainVertex, TileMesh};
+use globus_terrain::{ColourImage, MorphVertex, TerrainVertex, TileMesh};
 use globus_tiling::{GLOBE_SCHEME, TileKey};
 use rustc_hash::FxHashMap;
 
@@ -67,7 +69,7 @@ impl TilePoolOptions {
         let colour_layer: u64 = (0..MIP_LEVELS)
             .map(|m| u64::from((COLOUR_SIZE >> m).pow(2)) * 4)
             .sum();
-        u64::from(self.vertices) * (VERTEX_BYTES + 4)
+        u64::from(self.vertices) * (VERTEX_BYTES + EXTRA_BYTES)
             + u64::from(self.indices) * 4
             + colour_layer * u64::from(self.slots)
     }
@@ -186,7 +188,19 @@ impl Residency {
     /// neither exists. Keys of the engine's tiles ([`GLOBE_SCHEME`]): the part is the tile's
     /// rectangle in its ancestor's, which in a reduced polar row may keep its whole width.
     pub fn colour_source(&self, key: TileKey) -> Option<ColourSource> {
-        let mut from = key;
+        self.colour_source_from(key, key)
+    }
+
+    /// The colour `key`'s parent shows, cropped and scaled to `key`'s rectangle: what a tile
+    /// growing out of its parent fades from. `None` for roots and where no ancestor has its
+    /// colour.
+    pub fn parent_colour_source(&self, key: TileKey) -> Option<ColourSource> {
+        self.colour_source_from(key, GLOBE_SCHEME.parent(key)?)
+    }
+
+    /// The nearest of `start` and its ancestors with its own colour, cropped to `key`.
+    fn colour_source_from(&self, key: TileKey, start: TileKey) -> Option<ColourSource> {
+        let mut from = start;
         loop {
             if let Some(r) = self.get(from)
                 && r.own_colour
@@ -336,7 +350,7 @@ impl Residency {
 /// Fixed-size GPU pools for terrain tiles.
 pub struct TilePool {
     vertex_buffer: wgpu::Buffer,
-    slot_buffer: wgpu::Buffer,
+    extra_buffer: wgpu::Buffer,
     index_buffer: wgpu::Buffer,
     colour_texture: wgpu::Texture,
     colour_view: wgpu::TextureView,
@@ -355,6 +369,18 @@ fn colour_fits(c: &ColourImage) -> bool {
             .all(|m| c.mips[m as usize].len() == ((COLOUR_SIZE >> m).pow(2) * 4) as usize)
 }
 const VERTEX_BYTES: u64 = size_of::<TerrainVertex>() as u64;
+const EXTRA_BYTES: u64 = size_of::<VertexExtra>() as u64;
+
+/// What the pool keeps per vertex beside the mesh's own [`TerrainVertex`] (12 bytes): the
+/// tile's slot and the vertex's morph target.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct VertexExtra {
+    /// The tile's slot.
+    pub slot: u32,
+    /// Where the vertex lies on its parent's surface.
+    pub morph: MorphVertex,
+}
 
 impl TilePool {
     /// Allocates the pools.
@@ -378,9 +404,9 @@ impl TilePool {
             u64::from(vertices) * VERTEX_BYTES,
             wgpu::BufferUsages::VERTEX,
         );
-        let slot_buffer = buffer(
-            "terrain vertex slots",
-            u64::from(vertices) * 4,
+        let extra_buffer = buffer(
+            "terrain vertex slots and morph targets",
+            u64::from(vertices) * EXTRA_BYTES,
             wgpu::BufferUsages::VERTEX,
         );
         let index_buffer = buffer(
@@ -416,7 +442,7 @@ impl TilePool {
         let gpu_bytes = options.gpu_bytes();
         Self {
             vertex_buffer,
-            slot_buffer,
+            extra_buffer,
             index_buffer,
             colour_texture,
             colour_view,
@@ -473,17 +499,24 @@ impl TilePool {
         self.residency.colour_source(key)
     }
 
-    /// Uploads a tile with its colour, or without (`None`: it borrows its nearest resident
-    /// ancestor's until [`TilePool::upload_colour`]), evicting least recently used tiles to
-    /// make room (pushed to `evicted`, also when the upload then fails). Returns its slot, or
-    /// `None` if the frame's budget is spent, the data is malformed, or everything that could
-    /// make room is in use this frame (the pool is too small for the view: the caller should
-    /// lower detail).
+    /// The colour `key`'s parent shows (see [`Residency::parent_colour_source`]).
+    pub fn parent_colour_source(&self, key: TileKey) -> Option<ColourSource> {
+        self.residency.parent_colour_source(key)
+    }
+
+    /// Uploads a tile with its morph targets (one per vertex, else none: the tile has no
+    /// parent to grow out of) and its colour, or without (`None`: it borrows its nearest
+    /// resident ancestor's until [`TilePool::upload_colour`]), evicting least recently used
+    /// tiles to make room (pushed to `evicted`, also when the upload then fails). Returns its
+    /// slot, or `None` if the frame's budget is spent, the data is malformed, or everything
+    /// that could make room is in use this frame (the pool is too small for the view: the
+    /// caller should lower detail).
     pub fn upload(
         &mut self,
         queue: &wgpu::Queue,
         key: TileKey,
         mesh: &TileMesh,
+        morph: &[MorphVertex],
         colour: Option<&ColourImage>,
         evicted: &mut Vec<TileKey>,
     ) -> Option<u32> {
@@ -512,10 +545,24 @@ impl TilePool {
             u64::from(r.vertices.start) * VERTEX_BYTES,
             bytemuck::cast_slice(&mesh.vertices),
         );
+        let own;
+        let morph = if morph.len() == mesh.vertices.len() {
+            morph
+        } else {
+            own = MorphVertex::none(mesh);
+            &own
+        };
+        let extras: Vec<VertexExtra> = morph
+            .iter()
+            .map(|&morph| VertexExtra {
+                slot: r.slot,
+                morph,
+            })
+            .collect();
         queue.write_buffer(
-            &self.slot_buffer,
-            u64::from(r.vertices.start) * 4,
-            bytemuck::cast_slice(&vec![r.slot; mesh.vertices.len()]),
+            &self.extra_buffer,
+            u64::from(r.vertices.start) * EXTRA_BYTES,
+            bytemuck::cast_slice(&extras),
         );
         queue.write_buffer(
             &self.index_buffer,
@@ -603,7 +650,7 @@ impl TilePool {
     }
 
     pub(crate) fn vertex_buffers(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
-        (&self.vertex_buffer, &self.slot_buffer)
+        (&self.vertex_buffer, &self.extra_buffer)
     }
 
     pub(crate) fn index_buffer(&self) -> &wgpu::Buffer {

@@ -1183,6 +1183,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
         key,
         sse_px: 4.0,
         distance_m: 1e6,
+        morph: 1.0,
     });
     while !matches!(layer.colour(tile), Some(TileColour::Ready(_))) {
         assert!(Instant::now() < deadline, "imagery never arrived");

@@ -6,6 +6,7 @@
 //! * [`TileMesh`]: the tile's adaptive mesh (an error-bounded cut of its grid) with vertices
 //!   relative to its own origin (f32), normals, skirts and exact bounds, ready to upload.
 //! * [`grid`]: the sample grid every tile shares.
+//! * [`MorphVertex`]: where a mesh's vertices lie on its parent's surface (geomorphing).
 //! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and greedy Delaunay plus
 //!   Kaiser's plane-deviance decimation).
 //! * [`quantized_mesh`]: Cesium's quantized-mesh-1.0, encoded and decoded (untrusted input).
@@ -18,6 +19,7 @@ pub mod encoding;
 mod generate;
 pub mod grid;
 mod mesh;
+pub mod morph;
 pub mod noise;
 mod planet;
 pub mod quantized_mesh;
@@ -31,5 +33,6 @@ mod tile;
 pub const MAX_ABS_HEIGHT_M: f64 = 100_000.0;
 
 pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
+pub use morph::MorphVertex;
 pub use planet::{Fields, ProceduralPlanet, Relief};
 pub use tile::{ColourImage, TerrainTile};

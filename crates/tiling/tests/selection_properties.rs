@@ -185,6 +185,41 @@ fn check_invariants(
         }
     }
 
+    // Morphing: roots show their own surface; siblings grow out of their parent together;
+    // a tile whose own error is over the bound (its children loading) shows all of its own.
+    for d in &sel.draw {
+        prop_assert!(
+            (0.0..=1.0).contains(&d.morph),
+            "{:?} morph {}",
+            d.key,
+            d.morph
+        );
+        let Some(parent) = scheme.parent(d.key) else {
+            prop_assert_eq!(d.morph, 1.0);
+            continue;
+        };
+        for s in sel
+            .draw
+            .iter()
+            .filter(|s| scheme.parent(s.key) == Some(parent))
+        {
+            prop_assert_eq!(s.morph, d.morph, "{:?} and {:?}", d.key, s.key);
+        }
+        let ratio = scheme
+            .children(parent)
+            .iter()
+            .map(|&c| oracle.tile(c).geometric_error_m / oracle.tile(parent).geometric_error_m)
+            .fold(0.0, f64::max);
+        if d.sse_px > options.max_sse_px && ratio < 1.0 {
+            prop_assert!(
+                d.morph == 1.0,
+                "{:?} over the bound at morph {}",
+                d.key,
+                d.morph
+            );
+        }
+    }
+
     // Requests: parents are drawn, priorities descend, no tile with its descendant.
     for w in sel.requests.windows(2) {
         prop_assert!(w[0].priority >= w[1].priority);

@@ -20,6 +20,12 @@
 //!
 //! Longitudes may be unwrapped (beyond +-180, see [`crate::shape`]): geometry is tried at
 //! every whole-turn shift that brings it over the tile.
+//!
+//! Geomorphing: a tile that is growing out of its parent draws each vertex lifted along the
+//! body's normal towards the parent's surface by a fraction of its morph height. A surface
+//! given its vertices' morph heights ([`DrapeSurface::with_lifts`]) interpolates them with
+//! the positions, so every draped point carries the lift of the terrain under it
+//! ([`SurfacePoint::lift_m`]) and the renderer lifts it with the terrain.
 
 use globus_geo::DVec3;
 
@@ -38,6 +44,28 @@ pub struct DrapeSurface {
     /// Skirt walls under the tile's edges: top vertices (on the edge) and the skirt vertices
     /// under them.
     skirts: Vec<[u32; 4]>,
+    /// Per vertex, metres it moves along the body's normal to reach the parent's surface
+    /// (empty: none).
+    lifts: Vec<f64>,
+}
+
+/// A point on a draped surface, relative to the tile's origin, with the morph height of the
+/// terrain there (metres along the body's normal to the parent's surface; 0 without one).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// The point.
+    pub at: DVec3,
+    /// Its morph height.
+    pub lift_m: f64,
+}
+
+impl SurfacePoint {
+    fn lerp(self, other: Self, t: f64) -> Self {
+        Self {
+            at: self.at.lerp(other.at, t),
+            lift_m: self.lift_m + (other.lift_m - self.lift_m) * t,
+        }
+    }
 }
 
 /// A piece of a draped line: its ends on the surface (relative to the tile's origin) and
@@ -51,6 +79,8 @@ pub struct DrapedSegment {
     pub b: DVec3,
     /// Start and end along the line.
     pub along: [f64; 2],
+    /// The morph heights at the start and end ([`SurfacePoint::lift_m`]).
+    pub lift_m: [f64; 2],
 }
 
 impl DrapeSurface {
@@ -86,6 +116,25 @@ impl DrapeSurface {
             triangles,
             cells,
             skirts: Vec::new(),
+            lifts: Vec::new(),
+        }
+    }
+
+    /// Gives the vertices morph heights (one per vertex, metres along the body's normal to
+    /// the parent's surface), which draped points then carry. A list of another length is
+    /// ignored (no lifts).
+    pub fn with_lifts(mut self, lifts: Vec<f64>) -> Self {
+        if lifts.len() == self.positions.len() {
+            self.lifts = lifts;
+        }
+        self
+    }
+
+    /// Vertex `v` with its lift.
+    fn vertex(&self, v: u32) -> SurfacePoint {
+        SurfacePoint {
+            at: self.positions[v as usize],
+            lift_m: self.lifts.get(v as usize).copied().unwrap_or(0.0),
         }
     }
 
@@ -167,17 +216,26 @@ impl DrapeSurface {
                 let along = [s as f64 + lo, s as f64 + hi];
                 // Pieces meeting on a triangle edge share one end point exactly.
                 let a = match out.last() {
-                    Some(prev) if prev.along[1] == along[0] => prev.b,
+                    Some(prev) if prev.along[1] == along[0] => SurfacePoint {
+                        at: prev.b,
+                        lift_m: prev.lift_m[1],
+                    },
                     _ => p(lo),
                 };
-                out.push(DrapedSegment { a, b: p(hi), along });
+                let b = p(hi);
+                out.push(DrapedSegment {
+                    a: a.at,
+                    b: b.at,
+                    along,
+                    lift_m: [a.lift_m, b.lift_m],
+                });
             }
         }
     }
 
     /// Drapes a triangle (longitude, latitude in degrees, shifted by `shift`): appends the
     /// 3D triangles covering its part of the surface, relative to the tile's origin.
-    pub fn drape_triangle(&self, tri: [[f64; 2]; 3], shift: f64, out: &mut Vec<[DVec3; 3]>) {
+    pub fn drape_triangle(&self, tri: [[f64; 2]; 3], shift: f64, out: &mut Vec<[SurfacePoint; 3]>) {
         let t = tri.map(|p| self.to_uv(p[0] + shift, p[1]));
         let [lo, hi] = bbox(t);
         if hi[0] < 0.0 || hi[1] < 0.0 || lo[0] > 1.0 || lo[1] > 1.0 {
@@ -212,7 +270,7 @@ impl DrapeSurface {
                         continue;
                     }
                     if mesh.iter().all(|&p| inside(p)) {
-                        out.push(idx.map(|v| self.positions[v as usize]));
+                        out.push(idx.map(|v| self.vertex(v)));
                         continue;
                     }
                     poly.clear();
@@ -227,7 +285,7 @@ impl DrapeSurface {
                     if poly.len() < 3 {
                         continue;
                     }
-                    let p: Vec<DVec3> = poly.iter().map(|&q| self.point_in(k, q)).collect();
+                    let p: Vec<SurfacePoint> = poly.iter().map(|&q| self.point_in(k, q)).collect();
                     for m in 1..p.len() - 1 {
                         out.push([p[0], p[m], p[m + 1]]);
                     }
@@ -242,7 +300,7 @@ impl DrapeSurface {
         t: [[f64; 2]; 3],
         lo: [f64; 2],
         hi: [f64; 2],
-        out: &mut Vec<[DVec3; 3]>,
+        out: &mut Vec<[SurfacePoint; 3]>,
     ) {
         for &[a, b, sa, sb] in &self.skirts {
             let (ua, ub) = (self.uv[a as usize], self.uv[b as usize]);
@@ -253,7 +311,7 @@ impl DrapeSurface {
             let Some((t0, t1)) = segment_in_triangle(ua, ub, t, 0.0, 1.0) else {
                 continue;
             };
-            let p = |i: u32| self.positions[i as usize];
+            let p = |i: u32| self.vertex(i);
             let (top0, top1) = (p(a).lerp(p(b), t0), p(a).lerp(p(b), t1));
             let (bot0, bot1) = (p(sa).lerp(p(sb), t0), p(sa).lerp(p(sb), t1));
             out.push([top0, top1, bot0]);
@@ -263,7 +321,7 @@ impl DrapeSurface {
 
     /// The point of the surface over (longitude, latitude) in degrees shifted by `shift`,
     /// relative to the tile's origin, if the tile covers it.
-    pub fn point(&self, lon: f64, lat: f64, shift: f64) -> Option<DVec3> {
+    pub fn point(&self, lon: f64, lat: f64, shift: f64) -> Option<SurfacePoint> {
         let q = self.to_uv(lon + shift, lat);
         if !(0.0..=1.0).contains(&q[0]) || !(0.0..=1.0).contains(&q[1]) {
             return None;
@@ -278,11 +336,11 @@ impl DrapeSurface {
         })
     }
 
-    /// The 3D point at `q` (u, v) in triangle `k`'s plane.
-    fn point_in(&self, k: u32, q: [f64; 2]) -> DVec3 {
+    /// The 3D point at `q` (u, v) in triangle `k`'s plane, and its lift.
+    fn point_in(&self, k: u32, q: [f64; 2]) -> SurfacePoint {
         let idx = self.triangles[k as usize];
         let [a, b, c] = idx.map(|v| self.uv[v as usize]);
-        let [pa, pb, pc] = idx.map(|v| self.positions[v as usize]);
+        let [pa, pb, pc] = idx.map(|v| self.vertex(v));
         let area = cross(a, b, c);
         if area == 0.0 {
             return pa;
@@ -290,7 +348,10 @@ impl DrapeSurface {
         let wb = cross(a, q, c) / area;
         let wc = cross(a, b, q) / area;
         let wa = 1.0 - wb - wc;
-        pa * wa + pb * wb + pc * wc
+        SurfacePoint {
+            at: pa.at * wa + pb.at * wb + pc.at * wc,
+            lift_m: pa.lift_m * wa + pb.lift_m * wb + pc.lift_m * wc,
+        }
     }
 }
 
@@ -433,7 +494,7 @@ mod tests {
             let tri = t.map(|i| s.uv[i as usize]);
             let o = cross(tri[0], tri[1], tri[2]).signum();
             if (0..3).all(|e| cross(tri[e], tri[(e + 1) % 3], [u, v]) * o >= -1e-12) {
-                return s.point_in(k as u32, [u, v]).z;
+                return s.point_in(k as u32, [u, v]).at.z;
             }
         }
         f64::NAN
@@ -485,7 +546,7 @@ mod tests {
         let area: f64 = out
             .iter()
             .map(|t| {
-                let [a, b, c] = t.map(|p| [p.x, p.y]);
+                let [a, b, c] = t.map(|p| [p.at.x, p.at.y]);
                 cross(a, b, c).abs() / 2.0
             })
             .sum();
@@ -496,7 +557,7 @@ mod tests {
             "{area} vs {expected}"
         );
         for t in &out {
-            let c = (t[0] + t[1] + t[2]) / 3.0;
+            let c = (t[0].at + t[1].at + t[2].at) / 3.0;
             assert!((c.z - mesh_height(&s, c.x / 1000.0, c.y / 1000.0)).abs() < 1e-9);
         }
         // A triangle covering the tile gives back the whole mesh.
@@ -522,11 +583,11 @@ mod tests {
         let (mut out, mut without) = (Vec::new(), Vec::new());
         s.drape_triangle(fill, 0.0, &mut out);
         plain.drape_triangle(fill, 0.0, &mut without);
-        let walls: Vec<&[DVec3; 3]> = out.iter().filter(|t| !without.contains(t)).collect();
+        let walls: Vec<&[SurfacePoint; 3]> = out.iter().filter(|t| !without.contains(t)).collect();
         assert_eq!(walls.len(), 2, "{walls:?}");
         let area: f64 = walls
             .iter()
-            .map(|t| ((t[1] - t[0]).cross(t[2] - t[0])).length() / 2.0)
+            .map(|t| ((t[1].at - t[0].at).cross(t[2].at - t[0].at)).length() / 2.0)
             .sum();
         // 125 m of edge (of 250) by 100 m.
         assert!((area - 125.0 * 100.0).abs() < 1.0, "{area}");
@@ -536,7 +597,8 @@ mod tests {
     fn a_draped_point_is_on_the_mesh() {
         let (s, _) = surface();
         let p = s.point(10.3, 50.6, 0.0).unwrap();
-        assert!((p.z - mesh_height(&s, 0.3, 0.4)).abs() < 1e-9);
+        assert!((p.at.z - mesh_height(&s, 0.3, 0.4)).abs() < 1e-9);
+        assert_eq!(p.lift_m, 0.0);
         assert!(s.point(12.0, 50.6, 0.0).is_none());
     }
 
@@ -548,5 +610,40 @@ mod tests {
         let mut out = Vec::new();
         s.drape_line(&[[370.2, 50.5], [370.8, 50.5]], -360.0, &mut out);
         assert!(!out.is_empty());
+    }
+
+    #[test]
+    fn draped_points_carry_the_lift_of_the_terrain_under_them() {
+        // Lifts that are a linear function of (u, v): every draped point's lift is that
+        // function where it lies, as the GPU interpolates the terrain's.
+        let (s, _) = surface();
+        let lift = |u: f64, v: f64| 10.0 + 30.0 * u - 20.0 * v;
+        let lifts = s.uv.iter().map(|&[u, v]| lift(u, v)).collect();
+        let s = s.with_lifts(lifts);
+        let check = |p: SurfacePoint| {
+            let want = lift(p.at.x / 1000.0, p.at.y / 1000.0);
+            assert!((p.lift_m - want).abs() < 1e-9, "{p:?}: {want}");
+        };
+        check(s.point(10.3, 50.6, 0.0).unwrap());
+        let mut tris = Vec::new();
+        s.drape_triangle([[10.1, 50.1], [10.9, 50.2], [10.4, 50.8]], 0.0, &mut tris);
+        assert!(!tris.is_empty());
+        tris.iter().flatten().copied().for_each(check);
+        let mut segs = Vec::new();
+        s.drape_line(&[[9.8, 50.1], [11.3, 50.9]], 0.0, &mut segs);
+        for seg in &segs {
+            for (at, lift_m) in [(seg.a, seg.lift_m[0]), (seg.b, seg.lift_m[1])] {
+                check(SurfacePoint { at, lift_m });
+            }
+        }
+        // A list of the wrong length is ignored.
+        let (s, _) = surface();
+        assert_eq!(
+            s.with_lifts(vec![1.0])
+                .point(10.3, 50.6, 0.0)
+                .unwrap()
+                .lift_m,
+            0.0
+        );
     }
 }

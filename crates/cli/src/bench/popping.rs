@@ -8,8 +8,8 @@
 
 use std::time::Duration;
 
-use anyhow::{Context, bail};
-use globus_engine::{GlobeBuilder, Headless, frame_change};
+use anyhow::Context;
+use globus_engine::{GlobeBuilder, Headless};
 
 use super::quantiles;
 use crate::args::{self, BenchArgs};
@@ -31,28 +31,25 @@ pub fn run(
     let mut off = Headless::new(builder, width, height)?;
     super::light(a, &mut off)?;
     let view = spec.view(off.globe(), a.globe.fov_deg, width, height);
-    let mut frames = Vec::new();
-    let mut before = None;
-    for step in 0..=STEPS {
-        let bound =
-            COARSEST_PX * (FINEST_PX / COARSEST_PX).powf(f64::from(step) / f64::from(STEPS));
-        off.globe_mut().set_error_bound_px(bound)?;
-        let frame = off.render_complete(&view, Duration::from_secs(300), &mut [])?;
-        if !frame.complete {
-            bail!("frame {step} (bound {bound:.2} px) did not finish loading in 300 s");
-        }
-        let change = before
-            .as_ref()
-            .and_then(|b| frame_change(b, &frame.image, VISIBLE));
-        frames.push(serde_json::json!({
-            "sse_bound_px": frame.report.sse_bound_px,
-            "tiles": frame.report.selection.selected,
-            "max_level": frame.report.selection.max_level,
-            "mean_abs_change": change.map(|c| c.mean_abs),
-            "changed_share": change.map(|c| c.changed_share),
-        }));
-        before = Some(frame.image);
-    }
+    let frames: Vec<serde_json::Value> = off
+        .sweep_error_bound(
+            &view,
+            (COARSEST_PX, FINEST_PX),
+            STEPS,
+            VISIBLE,
+            Duration::from_secs(300),
+        )?
+        .into_iter()
+        .map(|f| {
+            serde_json::json!({
+                "sse_bound_px": f.sse_bound_px,
+                "tiles": f.tiles,
+                "max_level": f.max_level,
+                "mean_abs_change": f.change.map(|c| c.mean_abs),
+                "changed_share": f.change.map(|c| c.changed_share),
+            })
+        })
+        .collect();
     let series =
         |key: &str| -> Vec<f64> { frames.iter().filter_map(|f| f[key].as_f64()).collect() };
     let (mean, share) = (series("mean_abs_change"), series("changed_share"));

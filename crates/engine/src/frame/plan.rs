@@ -194,6 +194,7 @@ mod tests {
             key,
             sse_px: 1.0,
             distance_m: 1.0,
+            morph: 1.0,
         };
         let a = TileKey::new(5, 10, 7);
         let b = TileKey::new(5, 11, 7);

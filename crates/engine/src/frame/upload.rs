@@ -5,9 +5,14 @@
 //! tile is uploaded without it, reading its nearest resident ancestor's colour cropped and
 //! scaled (a root is uploaded first if no ancestor has colour on the GPU), and its own colour
 //! follows when it arrives. Drawn tiles' colours go up before new tiles: they are on screen.
+//!
+//! A tile goes up with its morph targets on its parent's surface ([`MorphVertex`]), from the
+//! parent's heights in the CPU cache (a drawn tile's ancestors are in use, so they are
+//! there); without them (a root) it shows its own surface at once.
 
 use globus_render::TilePool;
 use globus_stream::{TerrainLayer, TileColour};
+use globus_terrain::MorphVertex;
 use globus_tiling::{DrawTile, GLOBE_SCHEME, TileKey};
 
 use super::plan::FramePlan;
@@ -68,9 +73,10 @@ pub(crate) fn make_resident(
             break;
         }
         // Evicted tiles need no bookkeeping here: selection asks the pools what is resident.
+        let morph = morph_targets(layer, r.key);
         let mut evicted = Vec::new();
         if pool
-            .upload(queue, r.key, &data.mesh, own, &mut evicted)
+            .upload(queue, r.key, &data.mesh, &morph, own, &mut evicted)
             .is_none()
         {
             pool_full = true;
@@ -108,7 +114,26 @@ fn colour_to_borrow(
         pool.upload_colour(queue, root, colour)
     } else {
         let mut evicted = Vec::new();
-        pool.upload(queue, root, &data.mesh, Some(colour), &mut evicted)
+        pool.upload(queue, root, &data.mesh, &[], Some(colour), &mut evicted)
             .is_some()
     }
+}
+
+/// Where the vertices of a loaded tile's mesh lie on its parent's surface, from the parent's
+/// data in the CPU cache; empty for roots, tiles not loaded, or a parent gone from the cache
+/// (the tile then shows its own surface at once).
+pub(crate) fn morph_targets(layer: &TerrainLayer, key: TileKey) -> Vec<MorphVertex> {
+    let (Some(data), Some(parent)) = (
+        layer.get(key),
+        GLOBE_SCHEME.parent(key).and_then(|p| layer.get(p)),
+    ) else {
+        return Vec::new();
+    };
+    MorphVertex::towards_parent(
+        &data.tile,
+        &data.mesh,
+        &parent.tile,
+        &parent.mesh,
+        layer.ellipsoid(),
+    )
 }

@@ -3,7 +3,7 @@
 //! tile gets from the draped part.
 
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
-use globus_terrain::TileMesh;
+use globus_terrain::{MorphVertex, TileMesh};
 use globus_vector::shape::{self, Position, Straight};
 use globus_vector::{Clamp, DrapeSurface, DrapedSegment, Feature, LineIndex, Rgba, Selection};
 
@@ -659,7 +659,7 @@ impl ChunkWriter {
             local.clear();
             local.extend(pts[i..=j].iter().map(|&p| p - origin));
             let ends = (i == 0 && !closed, j + 1 == pts.len() && !closed);
-            push_run(&mut c.lines, &local, &along[i..=j], id, look, ends);
+            push_run(&mut c.lines, &local, &along[i..=j], &[], id, look, ends);
             i = j;
         }
     }
@@ -707,8 +707,9 @@ impl ChunkWriter {
 }
 
 /// The drape surface of a tile's mesh: its surface triangles and skirt walls, positions
-/// relative to its centre.
-pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
+/// relative to its centre, and its vertices' morph heights (`morph`, one per vertex, else
+/// none: see [`globus_terrain::MorphVertex`]).
+pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4], morph: &[MorphVertex]) -> DrapeSurface {
     let surface_count = mesh.surface_triangles as usize;
     let surface_vertices = mesh
         .indices
@@ -769,7 +770,9 @@ pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4]) -> DrapeSurface {
             Some([a, b, under(a)?, under(b)?])
         })
         .collect();
-    DrapeSurface::new(rect_deg, uv, positions, triangles).with_skirts(skirts)
+    DrapeSurface::new(rect_deg, uv, positions, triangles)
+        .with_skirts(skirts)
+        .with_lifts(morph.iter().map(|m| f64::from(m.dh_m)).collect())
 }
 
 /// A big fill's triangles over a tile (`rect`, at a whole-turn `shift` of the fill): its
@@ -806,6 +809,7 @@ struct LineScratch {
     pts: Vec<[f64; 2]>,
     segs: Vec<DrapedSegment>,
     run: Vec<DVec3>,
+    lifts: Vec<f64>,
     metres: Vec<f64>,
 }
 
@@ -864,7 +868,8 @@ impl TileDrape {
                     surface.drape_triangle(*t, shift, &mut tris);
                     for tri in &tris {
                         for &p in tri {
-                            self.fills.push(FillVertex::new(p, 0, colour, id, true));
+                            self.fills
+                                .push(FillVertex::new(p.at, 0, colour, id, true).lifted(p.lift_m));
                         }
                     }
                 }
@@ -876,7 +881,7 @@ impl TileDrape {
                 if let Some(at) = surface.point(lon, lat, shift) {
                     self.points.push(
                         LineInstance::point(
-                            at,
+                            at.at,
                             id,
                             p.colour,
                             p.outline,
@@ -884,7 +889,8 @@ impl TileDrape {
                             MARKER_OUTLINE_PX,
                             p.square,
                         )
-                        .with_icon(p.icon),
+                        .with_icon(p.icon)
+                        .lifted(at.lift_m),
                     );
                 }
             }
@@ -905,6 +911,7 @@ impl TileDrape {
             pts,
             segs,
             run,
+            lifts,
             metres,
         } = scratch;
         pts.clear();
@@ -927,16 +934,19 @@ impl TileDrape {
         // Runs of pieces that meet end to end.
         for piece in segs.chunk_by(|x: &DrapedSegment, y| x.along[1] == y.along[0]) {
             run.clear();
+            lifts.clear();
             metres.clear();
             run.push(piece[0].a);
             run.extend(piece.iter().map(|s| s.b));
+            lifts.push(piece[0].lift_m[0]);
+            lifts.extend(piece.iter().map(|s| s.lift_m[1]));
             metres.push(at(piece[0].along[0]));
             metres.extend(piece.iter().map(|s| at(s.along[1])));
             let caps = (
                 starts && piece[0].along[0] == 0.0,
                 ends && piece[piece.len() - 1].along[1] == last,
             );
-            push_run(&mut self.lines, run, metres, id, &l.look, caps);
+            push_run(&mut self.lines, run, metres, lifts, id, &l.look, caps);
         }
     }
 

@@ -33,7 +33,7 @@ const FILL_TOLERANCE: f32 = 1.0e-5;
 /// The same for a line's centre against the four terrain texels around it.
 const LINE_TOLERANCE: f32 = 1.0e-4;
 
-/// One line segment or point symbol (64 bytes).
+/// One line segment or point symbol (80 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub(crate) struct LineInstance {
@@ -52,6 +52,11 @@ pub(crate) struct LineInstance {
     pub along: [f32; 2],
     /// Dash pattern, pixels, one per byte (dash, gap, dash, gap); 0: solid.
     pub dash: u32,
+    /// Morph heights at `a` and `b` (draped on a tile growing out of its parent: metres
+    /// along the body's normal to the parent's surface; see `globus_vector::SurfacePoint`).
+    pub lift: [f32; 2],
+    /// Pads to WGSL's 16-byte struct alignment.
+    pub pad: [f32; 2],
 }
 
 /// Bits of [`LineInstance::icon_flags`] (from bit 16) saying how a segment meets its
@@ -121,14 +126,17 @@ impl LineLook {
 /// Appends the segments of a polyline run (`pts`, metres along the line `along`) to `out`,
 /// joined to each other; `start` / `end`: the run begins / ends where the line itself does
 /// (else the break is drawn round, as where a line leaves a tile or a chunk).
+/// `lifts`: the points' morph heights when draped (empty: none).
 pub(crate) fn push_run(
     out: &mut Vec<LineInstance>,
     pts: &[DVec3],
     along: &[f64],
+    lifts: &[f64],
     id: u32,
     look: &LineLook,
     (start, end): (bool, bool),
 ) {
+    let lift = |i: usize| lifts.get(i).map_or(0.0, |&l| l as f32);
     let n = pts.len().saturating_sub(1);
     for i in 0..n {
         let mut flags = look.style_bits();
@@ -148,6 +156,7 @@ pub(crate) fn push_run(
             icon_flags: flags,
             along: [a as f32, b as f32],
             dash: look.dash,
+            lift: [lift(i), lift(i + 1)],
             ..LineInstance::segment(pts[i], pts[i + 1], id, look.colour, look.width_px)
         });
     }
@@ -167,6 +176,8 @@ impl LineInstance {
             icon_flags: 0,
             along: [0.0; 2],
             dash: 0,
+            lift: [0.0; 2],
+            pad: [0.0; 2],
         }
     }
 
@@ -191,6 +202,16 @@ impl LineInstance {
             icon_flags: 0,
             along: [0.0; 2],
             dash: 0,
+            lift: [0.0; 2],
+            pad: [0.0; 2],
+        }
+    }
+
+    /// The point lifted by `lift_m` with the terrain under it (see [`LineInstance::lift`]).
+    pub(crate) fn lifted(self, lift_m: f64) -> Self {
+        Self {
+            lift: [lift_m as f32; 2],
+            ..self
         }
     }
 
@@ -206,7 +227,7 @@ impl LineInstance {
 /// Side of an icon in the icon array, texels.
 pub(crate) const ICON_SIZE: u32 = 64;
 
-/// One fill vertex (24 bytes).
+/// One fill vertex (28 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub(crate) struct FillVertex {
@@ -214,6 +235,8 @@ pub(crate) struct FillVertex {
     pub anchor: u32,
     pub colour: u32,
     pub id: u32,
+    /// Morph height (see [`LineInstance::lift`]).
+    pub lift: f32,
 }
 
 impl FillVertex {
@@ -224,6 +247,15 @@ impl FillVertex {
             anchor: anchor | if draped { DRAPED_BIT } else { 0 },
             colour: colour.packed(),
             id,
+            lift: 0.0,
+        }
+    }
+
+    /// The vertex lifted by `lift_m` with the terrain under it.
+    pub(crate) fn lifted(self, lift_m: f64) -> Self {
+        Self {
+            lift: lift_m as f32,
+            ..self
         }
     }
 }
@@ -237,6 +269,8 @@ struct Uniforms {
     clip_from_eye: [[f32; 4]; 4],
     viewport: [f32; 4],
     tolerance: [f32; 4],
+    /// The eye in ECEF (f32: for directions only) and the body's squared eccentricity.
+    eye: [f32; 4],
 }
 
 /// What an entry of the pool is.
@@ -363,8 +397,7 @@ impl Gpu {
             layout: &pipeline_layout,
             module: &module,
         };
-        let fill_attrs =
-            wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32, 3 => Uint32];
+        let fill_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32, 3 => Uint32, 4 => Float32];
         let fill_buffers = [Some(wgpu::VertexBufferLayout {
             array_stride: size_of::<FillVertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -658,17 +691,36 @@ impl Gpu {
         let camera = frame.camera();
         let (w, h) = camera.viewport_px();
         let (w, h) = (w.max(1) as f32, h.max(1) as f32);
+        let eye = camera.view().position.as_vec3();
+        let radii = frame.ellipsoid().radii();
         let u = Uniforms {
             clip_from_eye: camera.clip_from_eye().to_cols_array_2d(),
             viewport: [w, h, 1.0 / w, 1.0 / h],
             tolerance: [FILL_TOLERANCE, LINE_TOLERANCE, 0.0, 0.0],
+            eye: [
+                eye.x,
+                eye.y,
+                eye.z,
+                (1.0 - (radii.z * radii.z) / (radii.x * radii.x)) as f32,
+            ],
         };
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+        // Per anchor: its offset from the eye, and how far its tile has grown out of its
+        // parent (1 for chunks at altitude: nothing lifts them).
+        let morphs: FxHashMap<TileKey, f32> = frame
+            .drawn_tiles()
+            .iter()
+            .map(|d| (d.key, frame.morph_of(d) as f32))
+            .collect();
         let mut offsets = vec![[0f32; 4]; self.slot_origins.len().max(1)];
         for key in &self.drawn {
             if let Some(r) = self.entries.get(key) {
                 let o = camera.relative(self.slot_origins[r.slot as usize]);
-                offsets[r.slot as usize] = [o.x, o.y, o.z, 0.0];
+                let grown = match key {
+                    EntryKey::Tile(k) => morphs.get(k).copied().unwrap_or(1.0),
+                    EntryKey::Chunk(..) => 1.0,
+                };
+                offsets[r.slot as usize] = [o.x, o.y, o.z, grown];
             }
         }
         self.anchors

@@ -375,7 +375,7 @@ impl VectorLayer {
                 .map(|&id| self.pick_base.saturating_add(id))
                 .collect();
             tile.drape.retain_not(&picks);
-            let surface = build::surface(mesh, tile.rect);
+            let surface = build::surface(mesh, tile.rect, &frame.tile_morph_targets(key));
             for &id in &touching {
                 if let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref())
                     && b.bbox.is_some_and(|bb| bb.overlaps(tile.rect))
@@ -404,7 +404,7 @@ impl VectorLayer {
                 continue;
             };
             let rect = rect.to_degrees();
-            let surface = build::surface(mesh, rect);
+            let surface = build::surface(mesh, rect, &frame.tile_morph_targets(d.key));
             let mut drape = TileDrape::default();
             for (&id, e) in &self.entries {
                 let Some(b) = &e.built else {

@@ -1,7 +1,9 @@
 // Vector overlay: draped and absolute fills (triangles) and lines and points (screen-space
 // quads; joins, caps and dashes decided per fragment). Positions are f32 offsets from an
 // anchor (a tile's centre, or a chunk centre of geometry at altitude) whose offset from the
-// eye is computed in f64 on the CPU each frame.
+// eye is computed in f64 on the CPU each frame. Draped geometry follows the terrain's
+// geomorphing: each point carries the morph height of the ground under it and is lifted
+// along the body's normal by it times how much of its tile is still its parent's.
 
 struct Frame {
     clip_from_eye: mat4x4<f32>,
@@ -10,15 +12,32 @@ struct Frame {
     // x: how much nearer than its true depth a draped fill is tested (fraction of depth),
     // y: the same for a line's centre against the terrain around it.
     tolerance: vec4<f32>,
+    // The eye in ECEF (f32: for directions only); w: the body's squared eccentricity.
+    eye: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
-// Per anchor: anchor minus eye, metres (xyz).
+// Per anchor: anchor minus eye, metres (xyz); w: how far its tile has grown out of its
+// parent (1: its own surface, and for geometry at altitude).
 @group(0) @binding(1) var<storage, read> anchors: array<vec4<f32>>;
 // The depth the terrain pass left (reversed-Z: nearer is greater).
 // Bound as an unfilterable float texture: read with textureLoad on every backend (GL
 // cannot textureLoad a depth texture).
 @group(0) @binding(2) var terrain_depth: texture_2d<f32>;
+
+// A point `p` from `anchor`, lifted as the terrain under it is (`lift`: its morph height),
+// relative to the eye.
+fn lifted(anchor: u32, p: vec3<f32>, lift: f32) -> vec3<f32> {
+    let a = anchors[anchor];
+    var eye = a.xyz + p;
+    let parent = 1.0 - a.w;
+    if (lift != 0.0 && parent > 0.0) {
+        let q = frame.eye.xyz + eye;
+        let up = normalize(vec3<f32>(q.xy, q.z / (1.0 - frame.eye.w)));
+        eye = eye + up * (lift * parent);
+    }
+    return eye;
+}
 
 // ---- fills ----
 
@@ -27,6 +46,7 @@ struct FillIn {
     @location(1) anchor: u32,
     @location(2) colour: u32,
     @location(3) id: u32,
+    @location(4) lift: f32,
 }
 
 // The anchor's top bit marks a draped fill: tested slightly nearer than it is, since it lies
@@ -41,7 +61,7 @@ struct FillOut {
 
 @vertex
 fn fill_vs(v: FillIn) -> FillOut {
-    let eye = anchors[v.anchor & ~DRAPED_BIT].xyz + v.position;
+    let eye = lifted(v.anchor & ~DRAPED_BIT, v.position, v.lift);
     var clip = frame.clip_from_eye * vec4<f32>(eye, 1.0);
     if ((v.anchor & DRAPED_BIT) != 0u) {
         clip.z = clip.z * (1.0 + frame.tolerance.x);
@@ -71,7 +91,7 @@ struct OitOut {
 
 @vertex
 fn oit_vs(v: FillIn) -> OitOut {
-    let eye = anchors[v.anchor & ~DRAPED_BIT].xyz + v.position;
+    let eye = lifted(v.anchor & ~DRAPED_BIT, v.position, v.lift);
     let clip = frame.clip_from_eye * vec4<f32>(eye, 1.0);
     return OitOut(clip, srgb_to_linear(v.colour), length(eye));
 }
@@ -113,7 +133,7 @@ fn composite_fs(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
 
 // ---- lines and points ----
 
-// One segment or point (mirrors `LineInstance`, 64 bytes), six vertices each: read by
+// One segment or point (mirrors `LineInstance`, 80 bytes), six vertices each: read by
 // vertex index, so every drawn entry's range is one record of a multi-draw, and a segment
 // reads its neighbours (the records before and after it) for its joins.
 struct Line {
@@ -135,6 +155,8 @@ struct Line {
     along_b: f32,
     // Dash pattern, pixels, a byte each: dash, gap, dash, gap (0: solid).
     dash: u32,
+    // Morph heights at a and b (see `lifted`).
+    lift: vec2<f32>,
 }
 
 const JOINED_PREV: u32 = 0x10000u;
@@ -180,8 +202,8 @@ fn to_pixels(clip: vec4<f32>) -> vec2<f32> {
     return vec2<f32>((ndc.x * 0.5 + 0.5) * frame.viewport.x, (0.5 - ndc.y * 0.5) * frame.viewport.y);
 }
 
-fn project(anchor: u32, p: vec3<f32>) -> vec4<f32> {
-    return frame.clip_from_eye * vec4<f32>(anchors[anchor].xyz + p, 1.0);
+fn project(anchor: u32, p: vec3<f32>, lift: f32) -> vec4<f32> {
+    return frame.clip_from_eye * vec4<f32>(lifted(anchor, p, lift), 1.0);
 }
 
 // Unit direction from one screen point to another; zero if they (nearly) coincide.
@@ -232,8 +254,8 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     let index = vertex / 6u;
     let v = lines[index];
     var out: LineOut;
-    var ca = project(v.anchor, v.a);
-    var cb = project(v.anchor, v.b);
+    var ca = project(v.anchor, v.a, v.lift.x);
+    var cb = project(v.anchor, v.b, v.lift.y);
     if (ca.w < NEAR_W && cb.w < NEAR_W) {
         out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0); // behind the camera: outside the frame
         return out;
@@ -259,13 +281,15 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     var ja = Join(vec4<f32>(0.0), 1e30);
     var jb = Join(vec4<f32>(0.0), 1e30);
     if ((flags & JOINED_PREV) != 0u) {
-        let cp = project(lines[index - 1u].anchor, lines[index - 1u].a);
+        let prev = lines[index - 1u];
+        let cp = project(prev.anchor, prev.a, prev.lift.x);
         if (cp.w >= NEAR_W) {
             ja = join_at(direction(to_pixels(cp), sa), dir, hw, join);
         }
     }
     if ((flags & JOINED_NEXT) != 0u) {
-        let cn = project(lines[index + 1u].anchor, lines[index + 1u].b);
+        let next = lines[index + 1u];
+        let cn = project(next.anchor, next.b, next.lift.y);
         if (cn.w >= NEAR_W) {
             jb = join_at(dir, direction(sb, to_pixels(cn)), hw, join);
         }

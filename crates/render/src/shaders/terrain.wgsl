@@ -4,6 +4,12 @@
 // nothing large reaches f32) and where its colour is: a layer of the colour texture array
 // and the part of it over the tile (the whole of its own layer, or a crop of an ancestor's
 // while its own imagery loads).
+//
+// Geomorphing: a tile grows out of its parent over the last part of its level of detail.
+// Each vertex carries where it lies on the parent's surface (a height along the ellipsoid's
+// normal, and the parent's normal there) and each tile how far it has grown (`morph`, 0 at
+// the split, 1 when it splits in turn, from the LOD selection); the vertex, its normal and
+// the colour (the parent's, cropped, against the tile's own) are that blend.
 
 struct VsIn {
     // Metres from the tile centre.
@@ -14,6 +20,22 @@ struct VsIn {
     @location(2) uv: vec2<f32>,
     // Pool slot of the vertex's tile.
     @location(3) slot: u32,
+    // Drawn metres from the vertex to its parent's surface, along the ellipsoid's normal.
+    @location(4) morph_dh: f32,
+    // The parent surface's normal there, oct-encoded as `normal_oct`.
+    @location(5) parent_normal_oct: u32,
+}
+
+// Per slot: where the tile's colour and its parent's are, and how far it has grown.
+struct TileMap {
+    // uv scale (u, v), uv offset (u, v): the tile's part of its colour layer.
+    colour: vec4<f32>,
+    // The same in the layer its parent shows.
+    parent_colour: vec4<f32>,
+    // x: how far the tile has grown out of its parent (0 to 1); y: the parent colour's layer;
+    // z: how much of the tile's own colour shows over the parent's (its growth, and its own
+    // imagery fading in when it has just replaced an ancestor's).
+    morph: vec4<f32>,
 }
 
 // Per slot: tile centre minus eye position, metres (f64 on the CPU, rounded once).
@@ -21,8 +43,7 @@ struct VsIn {
 @group(1) @binding(0) var<storage, read> offsets: array<vec4<f32>>;
 @group(1) @binding(1) var colours: texture_2d_array<f32>;
 @group(1) @binding(2) var colour_sampler: sampler;
-// Per slot: uv scale (u, v), uv offset (u, v): the tile's part of its colour layer.
-@group(1) @binding(3) var<storage, read> colour_maps: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> tile_maps: array<TileMap>;
 // City lights: luminance, equirectangular (u east from 180 W, v south from the north pole).
 @group(1) @binding(4) var night_lights: texture_2d<f32>;
 @group(1) @binding(5) var night_sampler: sampler;
@@ -137,18 +158,32 @@ struct VsOut {
     @location(1) normal: vec3<f32>,
     @location(2) eye_offset: vec3<f32>,
     @location(3) @interpolate(flat) layer: u32,
+    @location(4) parent_uv: vec2<f32>,
+    @location(5) @interpolate(flat) parent_layer: u32,
+    @location(6) @interpolate(flat) colour_share: f32,
 }
 
 @vertex
 fn vs_main(v: VsIn) -> VsOut {
-    let eye_offset = offsets[v.slot].xyz + v.position;
+    let map = tile_maps[v.slot];
+    let morph = map.morph.x;
+    var eye_offset = offsets[v.slot].xyz + v.position;
+    if (morph < 1.0) {
+        // The ellipsoid's normal from the vertex's ECEF position (f32 is plenty for a
+        // direction).
+        let p = frame.eye_position.xyz + eye_offset;
+        let up = normalize(vec3<f32>(p.xy, p.z / (1.0 - frame.eye_position.w)));
+        eye_offset = eye_offset + up * (v.morph_dh * (1.0 - morph));
+    }
     var out: VsOut;
     out.clip = frame.clip_from_eye * vec4<f32>(eye_offset, 1.0);
-    let map = colour_maps[v.slot];
-    out.uv = v.uv * map.xy + map.zw;
-    out.normal = decode_oct(v.normal_oct);
+    out.uv = v.uv * map.colour.xy + map.colour.zw;
+    out.parent_uv = v.uv * map.parent_colour.xy + map.parent_colour.zw;
+    out.normal = mix(decode_oct(v.parent_normal_oct), decode_oct(v.normal_oct), morph);
     out.eye_offset = eye_offset;
     out.layer = u32(offsets[v.slot].w + 0.5);
+    out.parent_layer = u32(map.morph.y + 0.5);
+    out.colour_share = map.morph.z;
     return out;
 }
 
@@ -157,7 +192,9 @@ const GROUND_STEPS: i32 = 8;
 
 @fragment
 fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
-    let texel = textureSample(colours, colour_sampler, in.uv, in.layer);
+    let own = textureSample(colours, colour_sampler, in.uv, in.layer);
+    let parent = textureSample(colours, colour_sampler, in.parent_uv, in.parent_layer);
+    let texel = mix(parent, own, in.colour_share);
     let albedo = texel.rgb;
     let water = 1.0 - texel.a;
     let n = normalize(in.normal);

@@ -15,6 +15,9 @@
 //!    children with priority `sse`. A child that failed or has no data also stops refinement
 //!    here, so the ancestor keeps covering its area.
 //!
+//! Every drawn tile carries how far it has grown out of its parent's surface
+//! ([`morph_fraction`]): the renderer draws that blend, so splits and merges do not pop.
+//!
 //! Because a tile is only descended into when all its visible children can be drawn, every
 //! drawn tile is loaded and the drawn tiles never overlap; together with the culled tiles
 //! they partition the globe, so there are no holes. Only the roots can be missing (before
@@ -70,6 +73,36 @@ pub struct DrawTile {
     pub sse_px: f64,
     /// Distance from the eye to its bounding box, metres.
     pub distance_m: f64,
+    /// How far the tile has grown out of its parent's surface into its own, 0 to 1 (see
+    /// [`morph_fraction`]): the renderer draws that blend of the two, so a split or a merge
+    /// never moves a pixel in one frame. 1 for roots.
+    pub morph: f64,
+}
+
+/// How far a tile has grown out of its parent's surface (0) into its own (1), given the
+/// parent's screen-space error over the bound (`parent_excess`, above 1 once the parent is
+/// split) and the tile's error over its parent's (`error_ratio`, about 1/2).
+///
+/// A blend `t` of the two surfaces is off the full-resolution one by at most
+/// `(1 - t) e_parent + t e_child` (each surface's error bound, the blend's by convexity),
+/// so on screen by `bound * excess * (1 - t (1 - ratio))`. The fraction is the least `t`
+/// that keeps that within the bound: 0 when the parent has just split (the tile shows
+/// exactly the surface the parent showed), rising as the eye comes closer or the bound
+/// falls, and 1 when the tile's own error reaches the bound, the moment it splits in turn
+/// (so its children start from the surface it showed). This is Strugar's CDLOD morph
+/// (2010) driven by screen-space error instead of distance rings, per tile: siblings share
+/// it; neighbours with other parents may differ, and the skirts that already close cracks
+/// between levels close that step too.
+pub fn morph_fraction(parent_excess: f64, error_ratio: f64) -> f64 {
+    // NaN excess: no split; NaN ratio: nothing known to grow into.
+    if parent_excess.is_nan() || parent_excess <= 1.0 {
+        return 0.0;
+    }
+    let gained = 1.0 - error_ratio;
+    if gained.is_nan() || gained <= 1e-9 {
+        return 1.0;
+    }
+    ((1.0 - 1.0 / parent_excess) / gained).clamp(0.0, 1.0)
 }
 
 /// A tile the selection wants loaded.
@@ -148,7 +181,7 @@ pub fn select_into(
             continue;
         }
         match info.state {
-            TileState::Loaded => walk.visit(root, &info),
+            TileState::Loaded => walk.visit(root, &info, 1.0),
             TileState::Unloaded => walk.out.requests.push(TileRequest {
                 key: root,
                 priority: ROOT_PRIORITY,
@@ -231,15 +264,22 @@ impl<O: TileOracle> Walk<'_, O> {
         )
     }
 
-    fn visit(&mut self, key: TileKey, info: &TileInfo) {
+    /// `morph`: how far the tile has grown out of its parent (1 for roots).
+    fn visit(&mut self, key: TileKey, info: &TileInfo, morph: f64) {
         let (distance_m, sse_px, refine) = self.error(key, info);
+        let drawn = DrawTile {
+            key,
+            sse_px,
+            distance_m,
+            morph,
+        };
         if !refine {
-            self.draw(key, sse_px, distance_m);
+            self.draw(drawn);
             return;
         }
         let children = self.oracle.scheme().children(key);
         if children.is_empty() {
-            self.draw(key, sse_px, distance_m);
+            self.draw(drawn);
             return;
         }
         let mut visible = [None; 4];
@@ -261,12 +301,12 @@ impl<O: TileOracle> Walk<'_, O> {
             }
         }
         if blocked {
-            self.draw(key, sse_px, distance_m);
+            self.draw(drawn);
             return;
         }
         if !all_loaded {
             self.out.stats.waiting_for_children += 1;
-            self.draw(key, sse_px, distance_m);
+            self.draw(drawn);
             for (child, child_info) in children.iter().zip(visible.iter()) {
                 if matches!(child_info, Some(ci) if ci.state == TileState::Unloaded) {
                     self.out.requests.push(TileRequest {
@@ -286,22 +326,64 @@ impl<O: TileOracle> Walk<'_, O> {
             })
         };
         order.sort_unstable_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)));
+        // Siblings morph together (they share edges): by the family's largest error ratio,
+        // which keeps every one of them within the bound.
+        let excess = sse_px / self.options.max_sse_px;
+        let ratio = visible
+            .iter()
+            .flatten()
+            .map(|ci| ci.geometric_error_m / info.geometric_error_m)
+            .fold(0.0, f64::max);
+        let morph = morph_fraction(excess, ratio);
         for &mut i in order {
             if let Some(ci) = visible[i].as_ref() {
-                self.visit(children[i], ci);
+                self.visit(children[i], ci, morph);
             }
         }
     }
 
-    fn draw(&mut self, key: TileKey, sse_px: f64, distance_m: f64) {
+    fn draw(&mut self, tile: DrawTile) {
         let stats = &mut self.out.stats;
         stats.selected += 1;
-        stats.max_level = stats.max_level.max(key.level());
-        stats.max_sse_px = stats.max_sse_px.max(sse_px);
-        self.out.draw.push(DrawTile {
-            key,
-            sse_px,
-            distance_m,
-        });
+        stats.max_level = stats.max_level.max(tile.key.level());
+        stats.max_sse_px = stats.max_sse_px.max(tile.sse_px);
+        self.out.draw.push(tile);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::morph_fraction;
+
+    #[test]
+    fn the_morph_starts_at_the_split_ends_at_the_next_and_keeps_the_bound() {
+        // Just split: the parent's surface.
+        assert_eq!(morph_fraction(1.0, 0.5), 0.0);
+        assert_eq!(morph_fraction(0.7, 0.5), 0.0);
+        // Errors halving per level: the tile's own error reaches the bound at twice the
+        // parent's, and then it is all its own.
+        assert_eq!(morph_fraction(2.0, 0.5), 1.0);
+        assert_eq!(morph_fraction(5.0, 0.5), 1.0);
+        // In between it rises, and the blend's error bound, excess * (1 - t (1 - ratio)),
+        // never passes 1 (the bound) until the tile's own does (excess * ratio > 1: it
+        // splits).
+        let mut last = 0.0;
+        for k in 1..=100 {
+            let excess = 1.0 + f64::from(k) / 100.0;
+            for ratio in [0.25, 0.5, 0.8].into_iter().filter(|r| excess * r <= 1.0) {
+                let t = morph_fraction(excess, ratio);
+                assert!(
+                    excess * (1.0 - t * (1.0 - ratio)) <= 1.0 + 1e-12,
+                    "{excess} {ratio}"
+                );
+            }
+            let t = morph_fraction(excess, 0.5);
+            assert!(t > last, "{excess}: {t} after {last}");
+            last = t;
+        }
+        // A child no better than its parent (or a NaN) has nothing to grow into.
+        assert_eq!(morph_fraction(1.5, 1.0), 1.0);
+        assert_eq!(morph_fraction(1.5, f64::NAN), 1.0);
+        assert_eq!(morph_fraction(f64::NAN, 0.5), 0.0);
     }
 }
