@@ -74,6 +74,27 @@ fn tiles(c: &mut Criterion) {
             })
         });
     }
+    // Morph targets (computed on the render thread as a tile goes up), against the mesh
+    // build above: a level-12 tile on its level-11 parent, both cut adaptively.
+    let parent_key = TileKey::new(11, 1_067, 500);
+    let parent = planet.generate_tile(parent_key);
+    let child = globus_tiling::GLOBE_SCHEME.children(parent_key)[0];
+    let tile = planet.generate_tile(child);
+    let e = globus_geo::Ellipsoid::WGS84;
+    let options = MeshOptions::default();
+    let parent_mesh = TileMesh::build(&parent, &e, &e, &options);
+    let mesh = TileMesh::build(&tile, &e, &e, &options);
+    c.bench_function("morph targets adaptive", |b| {
+        b.iter(|| {
+            black_box(globus_terrain::MorphVertex::towards_parent(
+                black_box(&tile),
+                &mesh,
+                &parent,
+                &parent_mesh,
+                &e,
+            ))
+        })
+    });
 }
 criterion_group!(tilegen, tiles);
 
