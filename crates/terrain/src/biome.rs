@@ -145,7 +145,7 @@ pub fn colour(s: &Surface) -> [u8; 4] {
     // Snow above the snow line and on the polar caps, sliding off steep faces.
     let snow = smoothstep(snowline - 150.0, snowline + 150.0, h)
         .max(smoothstep(74.0, 80.0, lat_deg))
-        * (1.0 - smoothstep(38.0, 52.0, slope_deg));
+        * (1.0 - smoothstep(32.0, 46.0, slope_deg));
     c = mix(c, p.snow, snow);
     // Texture at every scale: micro relief lightens bumps and darkens hollows.
     let shade = 1.0 + 0.35 * s.micro;

@@ -37,8 +37,10 @@ const TEXTURE_OCTAVES: usize = 3;
 const RIDGE_BASE_M: f64 = 300_000.0;
 /// Amplitude of the largest ridge octave, metres.
 const RIDGE_AMPLITUDE_M: f64 = 5_200.0;
-/// Amplitude ratio between successive ridge octaves.
-const RIDGE_GAIN: f64 = 0.65;
+/// Amplitude ratio between successive ridge octaves. The finest ridges set the slopes:
+/// 0.67 puts 21-27 % of the highest ranges' area above 30 degrees at 30 m spacing (real
+/// alpine terrain: 20-30 %); 0.65 gave 9-13 %, 0.70 gives 46-52 %.
+const RIDGE_GAIN: f64 = 0.67;
 /// Number of ridge octaves (down to 0.6 km).
 const RIDGE_OCTAVES: usize = 10;
 /// The ridge shape `(1 - |n|)^2 - RIDGE_BIAS` lies in `[-RIDGE_BIAS, 1 - RIDGE_BIAS]`.
