@@ -224,6 +224,10 @@ pub struct BenchArgs {
     /// each frame changes from the one before.
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["from", "to", "soak", "traffic"])]
     pub popping: Option<String>,
+    /// With --popping: come straight down from the camera's height to a quarter of it over
+    /// the 120 frames at the configured bound (--sse, default 2 px) instead.
+    #[arg(long, requires = "popping")]
+    pub descent: bool,
     /// Traffic benchmark: replay this record (OpenSky state-vector CSV, plain or gzip) from
     /// --time at --speed for --frames frames at --fps, with the camera still at --camera
     /// (default: over the aircraft), and report the cost of ticks, of the layer's frames and

@@ -342,6 +342,30 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
     std::fs::remove_file(&path).ok();
 }
 
+/// `--descent`: the camera comes down to a quarter of its height at one bound; detail comes
+/// in as it does, and every frame moves.
+#[test]
+fn bench_popping_descends_at_a_fixed_bound() {
+    let v = json(&globus(&[
+        "bench",
+        "--popping",
+        "7.6,46,40000,200,-20",
+        "--descent",
+        "--sse",
+        "3",
+        "--size",
+        "96x54",
+    ]));
+    assert_eq!(v["frames"], 121, "{v}");
+    assert_eq!(v["descent"], true, "{v}");
+    assert_eq!(v["bounds_px"], serde_json::json!([3.0, 3.0]), "{v}");
+    let frames = v["per_frame"].as_array().unwrap();
+    let tiles = |f: &serde_json::Value| f["tiles"].as_u64().unwrap();
+    assert!(tiles(&frames[120]) > tiles(&frames[0]), "{v}");
+    assert_eq!(v["frames_changing"], 120, "{v}");
+    assert!(v["largest_step"].as_f64().unwrap() >= 0.0, "{v}");
+}
+
 #[test]
 fn bench_popping_reports_what_each_split_changes() {
     let v = json(&globus(&[

@@ -185,7 +185,7 @@ pub fn frame_change(before: &RgbaImage, after: &RgbaImage, threshold: u8) -> Opt
     })
 }
 
-/// One frame of [`Headless::sweep_error_bound`].
+/// One frame of [`Headless::sweep`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct SweepFrame {
     /// The error bound it was drawn with, pixels.
@@ -199,33 +199,31 @@ pub struct SweepFrame {
 }
 
 impl Headless {
-    /// The popping measurement (issue 20): with the camera still at `view`, lowers the error
-    /// bound geometrically from `from_px` to `to_px` over `steps` frames after the first,
-    /// each loaded completely before it is drawn (within `timeout`), so that what changes
-    /// between two frames is only what the finer bound split; a channel change above
-    /// `visible` (of 255) counts as visible. Fails if a frame does not finish loading.
-    pub fn sweep_error_bound(
+    /// The popping measurement (issue 20): draws `frames` (a view and the error bound to
+    /// draw it with) in order, each loaded completely before it is drawn (within `timeout`),
+    /// and compares each picture with the one before; a channel change above `visible` (of
+    /// 255) counts as visible. With the camera still and the bound falling, all that changes
+    /// is what the finer bound split; along a slow path, motion adds its own change. Fails if
+    /// a frame does not finish loading.
+    pub fn sweep(
         &mut self,
-        view: &View,
-        (from_px, to_px): (f64, f64),
-        steps: u32,
+        frames: &[(View, f64)],
         visible: u8,
         timeout: Duration,
     ) -> Result<Vec<SweepFrame>, EngineError> {
-        let mut frames = Vec::with_capacity(steps as usize + 1);
+        let mut out = Vec::with_capacity(frames.len());
         let mut before: Option<RgbaImage> = None;
-        for step in 0..=steps {
-            let bound = from_px * (to_px / from_px).powf(f64::from(step) / f64::from(steps.max(1)));
-            self.globe.set_error_bound_px(bound)?;
+        for (step, (view, bound)) in frames.iter().enumerate() {
+            self.globe.set_error_bound_px(*bound)?;
             let frame = self.render_complete(view, timeout, &mut [])?;
             if !frame.complete {
                 return Err(EngineError::Incomplete {
-                    what: "the error-bound sweep",
-                    frame: step,
+                    what: "the popping sweep",
+                    frame: step as u32,
                     timeout,
                 });
             }
-            frames.push(SweepFrame {
+            out.push(SweepFrame {
                 sse_bound_px: frame.report.sse_bound_px,
                 tiles: frame.report.selection.selected,
                 max_level: frame.report.selection.max_level,
@@ -235,8 +233,15 @@ impl Headless {
             });
             before = Some(frame.image);
         }
-        Ok(frames)
+        Ok(out)
     }
+}
+
+/// `steps + 1` values from `from` to `to`, geometrically (equal ratios between neighbours).
+pub fn geometric_steps(from: f64, to: f64, steps: u32) -> Vec<f64> {
+    (0..=steps)
+        .map(|k| from * (to / from).powf(f64::from(k) / f64::from(steps.max(1))))
+        .collect()
 }
 
 /// See [`frame_change`].

@@ -624,8 +624,11 @@ fn lowering_the_error_bound_grows_tiles_in_instead_of_popping_them() {
         builder.morph(morph);
         let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
         let view = cam.view(off.globe(), 60.0, w, h);
-        off.sweep_error_bound(&view, (8.0, 1.0), 60, 8, TIMEOUT)
-            .expect("every frame loads")
+        let frames: Vec<(View, f64)> = globus_engine::geometric_steps(8.0, 1.0, 60)
+            .into_iter()
+            .map(|bound| (view, bound))
+            .collect();
+        off.sweep(&frames, 8, TIMEOUT).expect("every frame loads")
     };
     let (popping, growing) = (sweep(false), sweep(true));
     let changes = |frames: &[globus_engine::SweepFrame]| -> Vec<f64> {

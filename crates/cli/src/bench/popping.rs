@@ -5,11 +5,16 @@
 //! what changes between two frames is only what the new bound split. Per frame: the mean
 //! absolute change of a colour channel against the frame before and the share of pixels
 //! changing by more than 8/255.
+//!
+//! With `--descent` the camera instead comes straight down from its height to a quarter of
+//! it over the 120 frames (geometrically) at the configured bound: motion changes every
+//! frame, and a split shows as a step in the series of changes (`largest_step`: the
+//! largest difference between the changes of two frames in a row, of 255).
 
 use std::time::Duration;
 
 use anyhow::Context;
-use globus_engine::{GlobeBuilder, Headless};
+use globus_engine::{CameraSpec, GlobeBuilder, Headless, View, geometric_steps};
 
 use super::quantiles;
 use crate::args::{self, BenchArgs};
@@ -30,15 +35,25 @@ pub fn run(
     let spec = args::parse_camera(camera, false).context("--popping")?;
     let mut off = Headless::new(builder, width, height)?;
     super::light(a, &mut off)?;
-    let view = spec.view(off.globe(), a.globe.fov_deg, width, height);
+    let view_at =
+        |off: &Headless, spec: &CameraSpec| spec.view(off.globe(), a.globe.fov_deg, width, height);
+    let (schedule, bounds): (Vec<(View, f64)>, [f64; 2]) = if a.descent {
+        let bound = a.globe.sse.unwrap_or(2.0);
+        let schedule = geometric_steps(spec.alt_m, spec.alt_m / 4.0, STEPS)
+            .into_iter()
+            .map(|alt_m| (view_at(&off, &CameraSpec { alt_m, ..spec }), bound))
+            .collect();
+        (schedule, [bound, bound])
+    } else {
+        let view = view_at(&off, &spec);
+        let schedule = geometric_steps(COARSEST_PX, FINEST_PX, STEPS)
+            .into_iter()
+            .map(|bound| (view, bound))
+            .collect();
+        (schedule, [COARSEST_PX, FINEST_PX])
+    };
     let frames: Vec<serde_json::Value> = off
-        .sweep_error_bound(
-            &view,
-            (COARSEST_PX, FINEST_PX),
-            STEPS,
-            VISIBLE,
-            Duration::from_secs(300),
-        )?
+        .sweep(&schedule, VISIBLE, Duration::from_secs(300))?
         .into_iter()
         .map(|f| {
             serde_json::json!({
@@ -54,14 +69,22 @@ pub fn run(
         |key: &str| -> Vec<f64> { frames.iter().filter_map(|f| f[key].as_f64()).collect() };
     let (mean, share) = (series("mean_abs_change"), series("changed_share"));
     let changing = share.iter().filter(|&&s| s > 0.0).count();
+    // Along a descent motion changes every frame, more as detail comes in: a split shows as
+    // a step in that series.
+    let largest_step = mean
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0, f64::max);
     let report = serde_json::json!({
         "camera": camera,
         "size": [width, height],
-        "bounds_px": [COARSEST_PX, FINEST_PX],
+        "descent": a.descent,
+        "bounds_px": bounds,
         "frames": frames.len(),
         "mean_abs_change": quantiles(mean),
         "changed_share": quantiles(share),
         "frames_changing": changing,
+        "largest_step": largest_step,
         "per_frame": frames,
     });
     println!("{}", serde_json::to_string_pretty(&report)?);

@@ -92,7 +92,9 @@ pub struct DrawTile {
 /// (so its children start from the surface it showed). This is Strugar's CDLOD morph
 /// (2010) driven by screen-space error instead of distance rings, per tile: siblings share
 /// it; neighbours with other parents may differ, and the skirts that already close cracks
-/// between levels close that step too.
+/// between levels close that step too. (Selection shows all of a tile's own surface once its
+/// own error is over the bound, whatever its parent's says: near the roots a child's box
+/// can be nearer the eye than its parent's.)
 pub fn morph_fraction(parent_excess: f64, error_ratio: f64) -> f64 {
     // NaN excess: no split; NaN ratio: nothing known to grow into.
     if parent_excess.is_nan() || parent_excess <= 1.0 {
@@ -264,9 +266,15 @@ impl<O: TileOracle> Walk<'_, O> {
         )
     }
 
-    /// `morph`: how far the tile has grown out of its parent (1 for roots).
+    /// `morph`: how far the tile and its siblings have grown out of their parent (1 for
+    /// roots).
     fn visit(&mut self, key: TileKey, info: &TileInfo, morph: f64) {
         let (distance_m, sse_px, refine) = self.error(key, info);
+        let morph = if sse_px > self.options.max_sse_px {
+            1.0
+        } else {
+            morph
+        };
         let drawn = DrawTile {
             key,
             sse_px,
