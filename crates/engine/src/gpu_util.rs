@@ -89,22 +89,7 @@ pub(crate) fn buffer_entry(
 }
 
 /// A float texture read by fragment shaders.
-pub(crate) fn texture_entry(
-    binding: u32,
-    filterable: bool,
-    view_dimension: wgpu::TextureViewDimension,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
+pub(crate) use globus_render::fragment_texture as texture_entry;
 
 /// Makes the render pipelines of one shader module and pipeline layout.
 pub(crate) struct Pipelines<'a> {

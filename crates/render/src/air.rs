@@ -131,8 +131,8 @@ impl AirResources {
                 },
                 count: None,
             },
-            fragment_texture(2, wgpu::TextureViewDimension::D2),
-            fragment_texture(3, wgpu::TextureViewDimension::D2),
+            fragment_texture(2, true, wgpu::TextureViewDimension::D2),
+            fragment_texture(3, true, wgpu::TextureViewDimension::D2),
             fragment_sampler(4),
         ]
     }

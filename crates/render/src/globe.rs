@@ -665,16 +665,19 @@ fn per_slot_storage(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// A filterable float texture read by fragment shaders.
-pub(crate) fn fragment_texture(
+/// The layout entry of a float texture read by fragment shaders (`filterable`: sampled
+/// with a filtering sampler; else read with `textureLoad` or a non-filtering one). Shared
+/// with the engine's overlay pipelines.
+pub fn fragment_texture(
     binding: u32,
+    filterable: bool,
     view_dimension: wgpu::TextureViewDimension,
 ) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::FRAGMENT,
         ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            sample_type: wgpu::TextureSampleType::Float { filterable },
             view_dimension,
             multisampled: false,
         },
@@ -697,10 +700,10 @@ fn terrain_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         label: Some("terrain"),
         entries: &[
             per_slot_storage(0),
-            fragment_texture(1, wgpu::TextureViewDimension::D2Array),
+            fragment_texture(1, true, wgpu::TextureViewDimension::D2Array),
             fragment_sampler(2),
             per_slot_storage(3),
-            fragment_texture(4, wgpu::TextureViewDimension::D2),
+            fragment_texture(4, true, wgpu::TextureViewDimension::D2),
             fragment_sampler(5),
         ],
     })
@@ -857,7 +860,7 @@ impl SkyView {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sky view"),
             entries: &[
-                fragment_texture(0, wgpu::TextureViewDimension::D2),
+                fragment_texture(0, true, wgpu::TextureViewDimension::D2),
                 fragment_sampler(1),
             ],
         });
