@@ -665,3 +665,30 @@ fn lowering_the_error_bound_grows_tiles_in_instead_of_popping_them() {
         "a frame stands out: {worst_after}/255 against a median of {median}/255"
     );
 }
+
+/// wgpu's OpenGL backend takes a square texture with a multiple of 6 layers for a cube map
+/// array, and the colour pool's array then sampled as black: with 1,200 slots the whole
+/// landscape was drawn black on llvmpipe. Pools of any size show the same ground.
+#[test]
+fn the_ground_has_its_colour_whatever_the_number_of_tile_slots() {
+    let (w, h) = (160, 90);
+    let cam = camera(7.6, 46.0, 3000.0, 20.0, -20.0, true);
+    let mut ground = Vec::new();
+    for slots in [301, 300] {
+        let mut builder = GlobeBuilder::new();
+        builder.gpu_tiles(slots);
+        let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+        let view = cam.view(off.globe(), 60.0, w, h);
+        let frame = off
+            .render_complete(&view, TIMEOUT, &mut [])
+            .expect("render");
+        let dir = globus_test_support::output_dir("rendering");
+        save_png(&frame.image, &dir.join(format!("slots_{slots}.png"))).expect("save");
+        assert!(frame.complete, "{slots} slots: still loading");
+        ground.push(mean_brightness(&frame.image, (0, w), (h * 3 / 4, h)));
+    }
+    assert!(
+        ground[0] > 60.0 && (ground[1] - ground[0]).abs() < 3.0,
+        "ground brightness with 301 and 300 slots: {ground:?}"
+    );
+}

@@ -665,6 +665,22 @@ fn per_slot_storage(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// The layer count to give a 2D texture array that should hold `wanted` layers, within the
+/// adapter's `max`: at least 2, and never a multiple of 6. wgpu's OpenGL backend decides a
+/// texture's GL target from its description alone: a square 2D texture with a multiple of 6
+/// layers becomes a cube map array and one with a single layer a plain 2D texture, and an
+/// array view of either samples as zeros (gfx-rs/wgpu#7428). A pool of 1,200 tile slots drew
+/// the whole landscape black on Mesa's llvmpipe that way. The extra layer goes unused.
+pub fn array_layers(wanted: u32, max: u32) -> u32 {
+    let max = max.max(2);
+    let n = wanted.clamp(2, max);
+    match (n % 6 == 0, n < max) {
+        (false, _) => n,
+        (true, true) => n + 1,
+        (true, false) => n - 1,
+    }
+}
+
 /// The layout entry of a float texture read by fragment shaders (`filterable`: sampled
 /// with a filtering sampler; else read with `textureLoad` or a non-filtering one). Shared
 /// with the engine's overlay pipelines.
@@ -954,7 +970,7 @@ impl SkyView {
 mod tests {
     use std::mem::{offset_of, size_of};
 
-    use super::{FrameUniforms, TileMap};
+    use super::{FrameUniforms, TileMap, array_layers};
     use crate::air::AtmosphereUniforms;
 
     /// The size and member offsets of the WGSL struct `name` as naga lays it out.
@@ -1000,6 +1016,20 @@ mod tests {
                 .collect();
             assert_eq!(got, offsets, "{shader}: {name}'s members");
         }
+    }
+
+    #[test]
+    fn texture_arrays_never_look_like_cube_maps_or_single_textures() {
+        for wanted in 0..=4000 {
+            for max in [256, 2048, 2046] {
+                let n = array_layers(wanted, max);
+                assert!(n % 6 != 0 && n >= 2 && n <= max, "{wanted} of {max}: {n}");
+                assert!(n + 1 >= wanted.min(max), "{wanted} of {max}: {n}");
+            }
+        }
+        assert_eq!(array_layers(1200, 2048), 1201);
+        assert_eq!(array_layers(2046, 2046), 2045);
+        assert_eq!(array_layers(1, 2048), 2);
     }
 
     #[test]

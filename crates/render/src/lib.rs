@@ -33,7 +33,7 @@ mod target;
 pub use camera::{FrameCamera, NEAR_PLANE_CAP_GL_M, NEAR_PLANE_CAP_M, near_plane_m};
 pub use context::{GpuContext, RenderError};
 pub use fade::COLOUR_FADE;
-pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting, fragment_texture};
+pub use globe::{DrawStats, FrameInputs, GlobeRenderer, Lighting, array_layers, fragment_texture};
 pub use night::{NightLights, NightLightsError};
 pub use pool::{
     ColourSource, MAX_TILE_INDICES, MAX_TILE_VERTICES, PoolStats, Residency, Resident, TilePool,

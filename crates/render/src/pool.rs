@@ -37,7 +37,8 @@ pub use globus_terrain::grid::{
 /// Size of the pools.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TilePoolOptions {
-    /// Number of tile slots (clamped to the adapter's texture array limit).
+    /// Number of tile slots (clamped to the adapter's texture array limit, and one more
+    /// where it is a multiple of 6: see [`crate::array_layers`]).
     pub slots: u32,
     /// Tiles uploaded per frame at most.
     pub uploads_per_frame: u32,
@@ -386,7 +387,8 @@ impl TilePool {
     /// Allocates the pools.
     pub fn new(device: &wgpu::Device, options: TilePoolOptions) -> Self {
         let limits = device.limits();
-        let slots = options.slots.min(limits.max_texture_array_layers).max(1);
+        // The colour array has a layer per slot: a count the GL backend takes for an array.
+        let slots = crate::array_layers(options.slots, limits.max_texture_array_layers);
         let max_buffer = limits.max_buffer_size;
         let vertices = (u64::from(options.vertices).min(max_buffer / VERTEX_BYTES) as u32)
             .max(MAX_TILE_VERTICES);

@@ -1112,7 +1112,8 @@ impl Oit {
 
 /// A texture array of icons (at least one layer, transparent when there is none).
 fn icon_array(device: &wgpu::Device, queue: &wgpu::Queue, icons: &[Vec<u8>]) -> wgpu::TextureView {
-    let layers = icons.len().max(1) as u32;
+    // At most MAX_ICONS (256, every adapter's least layer limit).
+    let layers = globus_render::array_layers(icons.len() as u32, 256);
     let texture = device.create_texture(&wgpu::TextureDescriptor {
         label: Some("vector icons"),
         size: wgpu::Extent3d {
