@@ -125,11 +125,13 @@ pub struct GlobeArgs {
     /// corridor-height). Repeatable.
     #[arg(long = "vector")]
     pub vector: Vec<String>,
-    /// City lights on the night side: an equirectangular image of the whole planet twice as
-    /// wide as tall (JPEG or PNG, e.g. ../shared/data/earth-night-4096x2048.jpg), drawn where
-    /// the Sun is down (see --time); images wider than 8192 are scaled down.
+    /// City lights on the night side, drawn where the Sun is down (see --time): an
+    /// equirectangular image of the whole planet twice as wide as tall (a .jpg, .jpeg or .png
+    /// file, e.g. ../shared/data/earth-night-4096x2048.jpg; wider than 8192 is scaled down),
+    /// or an imagery pyramid in any form --imagery takes (e.g. that image tiled by `globus
+    /// tile imagery`), read whole at start into one image at most 8192 wide.
     #[arg(long = "night-imagery")]
-    pub night_imagery: Option<PathBuf>,
+    pub night_imagery: Option<String>,
     /// The air: `earth` (Rayleigh and Mie scattering with ozone: the sky, haze over distant
     /// ground, reddened low sunlight) or `none` (black sky, no haze). Default: the Earth's.
     #[arg(long, value_parser = ["earth", "none"])]
@@ -440,8 +442,6 @@ pub fn vector_layer(
     Ok(Some(layer))
 }
 
-/// The globe the arguments (and their config file) describe. Checks every value the
-/// command line adds; the engine checks the rest when the globe is built.
 /// Reads `--night-imagery`: an equirectangular image, scaled down to at most
 /// [`NightLights::MAX_WIDTH`] wide.
 fn night_lights(path: &std::path::Path) -> anyhow::Result<globus_engine::NightLights> {
@@ -461,6 +461,8 @@ fn night_lights(path: &std::path::Path) -> anyhow::Result<globus_engine::NightLi
         .map_err(|e| anyhow::anyhow!("--night-imagery {}: {e}", path.display()))
 }
 
+/// The globe the arguments (and their config file) describe. Checks every value the
+/// command line adds; the engine checks the rest when the globe is built.
 pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     let mut builder = GlobeBuilder::new();
     let mut caches_sized = false;
@@ -543,8 +545,19 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     }
     builder.fog(!a.no_fog);
     builder.morph(!a.no_morph);
-    if let Some(path) = &a.night_imagery {
-        builder.night_lights(Some(std::sync::Arc::new(night_lights(path)?)));
+    if let Some(night) = &a.night_imagery {
+        let is_image = std::path::Path::new(night)
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| ["jpg", "jpeg", "png"].contains(&e.to_ascii_lowercase().as_str()));
+        if is_image {
+            let lights = night_lights(std::path::Path::new(night))?;
+            builder.night_lights(Some(std::sync::Arc::new(lights)));
+        } else {
+            let spec =
+                SourceSpec::parse(night).map_err(|e| anyhow::anyhow!("--night-imagery: {e}"))?;
+            builder.night_imagery(Some(spec));
+        }
     }
     for t in &a.imagery {
         builder.imagery(SourceSpec::parse(t).map_err(|e| anyhow::anyhow!("--imagery: {e}"))?);

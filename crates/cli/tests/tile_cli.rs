@@ -456,3 +456,81 @@ fn a_second_run_on_a_busy_output_is_refused_at_once() {
         "the lock file is left behind"
     );
 }
+
+/// `--night-imagery` takes a tiled pyramid as well as one image: NASA's night lights tiled
+/// by `globus tile imagery` (lossless PNG, geographic) light Europe's night exactly as the
+/// image itself does, a Web Mercator tiling of it within its double resampling, and a
+/// pyramid that is not there is named in one line.
+#[test]
+fn night_imagery_from_a_tiled_pyramid_lights_the_night_as_the_image_does() {
+    let dir = scratch("night");
+    let jpg = globus_test_support::shared_data("earth-night-4096x2048.jpg");
+    let render = |night: &str, name: &str| -> image::RgbImage {
+        let out = dir.join(format!("{name}.png"));
+        let o = globus(&[
+            "render",
+            "--camera",
+            "10,48,3000000,0,-90",
+            "--size",
+            "240x135",
+            "--time",
+            "2026-06-21T23:00:00Z",
+            "--night-imagery",
+            night,
+            "--out",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        image::open(&out).unwrap().to_rgb8()
+    };
+    let from_image = render(s(&jpg), "image");
+    // Lights: warm pixels brighter than the night around them.
+    let lit = from_image
+        .pixels()
+        .filter(|p| p[0] > 120 && p[0] > p[2])
+        .count();
+    assert!(lit > 200, "only {lit} lit pixels over Europe at night");
+    for (scheme, tolerance) in [("geographic", 0.0), ("webmercator", 2.0)] {
+        let pyramid = dir.join(scheme);
+        let o = globus(&[
+            "tile",
+            "imagery",
+            "--in",
+            s(&jpg),
+            "--out",
+            s(&pyramid),
+            "--format",
+            "png",
+            "--scheme",
+            scheme,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let from_tiles = render(s(&pyramid), scheme);
+        let diff: f64 = from_tiles
+            .as_raw()
+            .iter()
+            .zip(from_image.as_raw())
+            .map(|(a, b)| f64::from(a.abs_diff(*b)))
+            .sum::<f64>()
+            / from_image.as_raw().len() as f64;
+        assert!(
+            diff <= tolerance,
+            "{scheme}: mean difference {diff:.3} from the image's picture"
+        );
+    }
+    let missing = dir.join("no-such-pyramid");
+    fails_with_one_line(
+        &[
+            "render",
+            "--camera",
+            "0,0,1000,0,0",
+            "--size",
+            "64x64",
+            "--out",
+            s(&dir.join("x.png")),
+            "--night-imagery",
+            s(&missing),
+        ],
+        &["night imagery", "no-such-pyramid"],
+    );
+}

@@ -72,6 +72,7 @@ pub struct GlobeBuilder {
     viewport: Option<(u32, u32)>,
     source: Option<Arc<dyn TerrainSource>>,
     night_lights: Option<Arc<NightLights>>,
+    night_imagery: Option<SourceSpec>,
     atmosphere: Option<Atmosphere>,
     fog: bool,
     morph: bool,
@@ -102,6 +103,7 @@ impl Default for GlobeBuilder {
             viewport: None,
             source: None,
             night_lights: None,
+            night_imagery: None,
             atmosphere: None,
             fog: true,
             morph: true,
@@ -205,6 +207,56 @@ impl GlobeBuilder {
     pub fn night_lights(&mut self, lights: Option<Arc<NightLights>>) -> &mut Self {
         self.night_lights = lights;
         self
+    }
+
+    /// City lights from an imagery pyramid (any source [`GlobeBuilder::imagery`] takes, e.g. a
+    /// `globus tile imagery` directory of NASA's Black Marble): the whole layer is read once,
+    /// when the sources open, into one equirectangular image at most
+    /// [`NightLights::MAX_WIDTH`] wide (the lights are a single texture, not streamed per
+    /// tile), which is then as [`GlobeBuilder::night_lights`]. Lights set there take
+    /// precedence.
+    pub fn night_imagery(&mut self, spec: Option<SourceSpec>) -> &mut Self {
+        self.night_imagery = spec;
+        self
+    }
+
+    /// The night lights [`GlobeBuilder::night_imagery`] names, read now (or those set with
+    /// [`GlobeBuilder::night_lights`]).
+    pub fn open_night_lights(&self) -> Result<Option<Arc<NightLights>>, EngineError> {
+        let Some(spec) = self
+            .night_imagery
+            .as_ref()
+            .filter(|_| self.night_lights.is_none())
+        else {
+            return Ok(self.night_lights.clone());
+        };
+        let client = Arc::new(HttpClient::new(self.http.clone()));
+        let layer = open_layer(spec, LayerKind::Imagery, &client, self.disk_cache.as_ref())
+            .map_err(|error| EngineError::Source {
+                what: "night imagery",
+                url: spec.url.clone(),
+                error,
+            })?;
+        // A row of the deepest level's tiles at a time: 64 MiB holds 256 of 256 x 256.
+        let pyramid = imagery_pyramid(layer, DecodeLimits::default(), 64 << 20);
+        let image = globus_stream::mosaic::equirectangular(
+            &pyramid,
+            NightLights::MAX_WIDTH,
+            &globus_stream::fetch::Cancel::new(),
+        )
+        .map_err(|error| EngineError::NightImagery {
+            url: spec.url.clone(),
+            error,
+        })?;
+        tracing::info!(
+            "night imagery {}: {} x {} from its tiles",
+            spec.url,
+            image.width,
+            image.height
+        );
+        let lights = NightLights::from_rgb(image.width, image.height, &image.rgb)
+            .expect("a mosaic is twice as wide as tall and at most the widest lights");
+        Ok(Some(Arc::new(lights)))
     }
 
     /// The air over the body (default `None`: [`Atmosphere::for_body`], the Earth's over an
@@ -345,6 +397,9 @@ impl GlobeBuilder {
         if self.source.is_none() {
             self.source = Some(self.open_source()?);
         }
+        if self.night_lights.is_none() {
+            self.night_lights = self.open_night_lights()?;
+        }
         Ok(self)
     }
 
@@ -462,6 +517,11 @@ impl GlobeBuilder {
         colour_format: wgpu::TextureFormat,
     ) -> Result<Globe, EngineError> {
         self.check()?;
+        if self.night_lights.is_none() && self.night_imagery.is_some() {
+            let mut opened = self.clone();
+            opened.night_lights = self.open_night_lights()?;
+            return opened.build_with(device, queue, backend, software, colour_format);
+        }
         let source = self.open_source()?;
         Globe::new(
             self,

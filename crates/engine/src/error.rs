@@ -10,12 +10,20 @@ pub enum EngineError {
     /// A data source named in the options could not be opened.
     #[error("{}", source_message(what, url, error))]
     Source {
-        /// "terrain" or "imagery".
+        /// "terrain", "imagery" or "night imagery".
         what: &'static str,
         /// The source's location, as given.
         url: String,
         /// What went wrong (part of the message, not a separate source: printed once).
         error: globus_stream::fetch::OpenError,
+    },
+    /// A tile of the night imagery could not be read.
+    #[error("night imagery {url}: {error}")]
+    NightImagery {
+        /// The source's location, as given.
+        url: String,
+        /// What went wrong, naming the tile's URL or file.
+        error: globus_stream::fetch::FetchError,
     },
     /// The HTTP settings cannot be sent (control characters in a header, say).
     #[error("HTTP settings: {0}")]

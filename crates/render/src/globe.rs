@@ -674,7 +674,7 @@ fn per_slot_storage(binding: u32) -> wgpu::BindGroupLayoutEntry {
 pub fn array_layers(wanted: u32, max: u32) -> u32 {
     let max = max.max(2);
     let n = wanted.clamp(2, max);
-    match (n % 6 == 0, n < max) {
+    match (n.is_multiple_of(6), n < max) {
         (false, _) => n,
         (true, true) => n + 1,
         (true, false) => n - 1,
@@ -1023,7 +1023,10 @@ mod tests {
         for wanted in 0..=4000 {
             for max in [256, 2048, 2046] {
                 let n = array_layers(wanted, max);
-                assert!(n % 6 != 0 && n >= 2 && n <= max, "{wanted} of {max}: {n}");
+                assert!(
+                    !n.is_multiple_of(6) && n >= 2 && n <= max,
+                    "{wanted} of {max}: {n}"
+                );
                 assert!(n + 1 >= wanted.min(max), "{wanted} of {max}: {n}");
             }
         }

@@ -13,6 +13,7 @@ mod colour_jobs;
 pub mod decode;
 pub mod fetch;
 mod layer;
+pub mod mosaic;
 mod nodes;
 pub mod open;
 mod procedural;
