@@ -692,3 +692,41 @@ fn the_ground_has_its_colour_whatever_the_number_of_tile_slots() {
         "ground brightness with 301 and 300 slots: {ground:?}"
     );
 }
+
+/// Skylight: with the real Sun's lighting (no ambient floor) the ground keeps the sky's
+/// light after sunset, dimming through twilight, and is black once the sky has lost the Sun
+/// (before skylight, a constant ambient term lit the night side as brightly as dusk).
+#[test]
+fn the_sky_lights_the_ground_through_twilight_and_not_at_night() {
+    use globus_engine::Lighting;
+    let (w, h) = (96u32, 64u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    off.globe_mut().set_procedural_lights(false);
+    let view = camera(7.6, 46.0, 20_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let frame = Ellipsoid::WGS84.enu_frame(7.6f64.to_radians(), 46f64.to_radians());
+    // Mean luminance of the picture with the Sun `deg` above the horizon in the east.
+    let mut at = |deg: f64, ambient: f32| -> f64 {
+        let (s, c) = deg.to_radians().sin_cos();
+        let sun = Lighting {
+            sun_direction: (frame.up * s + frame.east * c).normalize(),
+            ambient,
+            ..Lighting::at_time(0.0)
+        };
+        let img = sunlit(&mut off, &view, &format!("skylight_{deg}_{ambient}"), sun);
+        let sum: f64 = img
+            .pixels
+            .chunks_exact(4)
+            .map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]))
+            .sum();
+        sum / f64::from(3 * w * h)
+    };
+    let (noon, dusk, late, night) = (at(60.0, 0.0), at(-3.0, 0.0), at(-9.0, 0.0), at(-25.0, 0.0));
+    assert!(
+        dusk > 2.5 && dusk < 0.2 * noon && late < dusk,
+        "noon {noon:.1}, 3 degrees after sunset {dusk:.2}, 9 after {late:.2}"
+    );
+    assert!(night < 0.5, "night without lights: {night:.2}");
+    // An ambient floor shows where the sky has nothing to give.
+    let floored = at(-25.0, 0.1);
+    assert!(floored > 5.0, "a floor of 0.1 at night: {floored:.2}");
+}

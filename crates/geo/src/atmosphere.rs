@@ -339,6 +339,47 @@ impl Atmosphere {
         sun: DVec3,
         max_distance: f64,
     ) -> (DVec3, DVec3) {
+        self.sky_marched(tables, h, view, sun, max_distance, 400)
+    }
+
+    /// The light the whole sky sends onto level ground (`h` = 0) with the Sun at cosine
+    /// `mu_s` from the zenith, for a Sun of illuminance 1: the integral of [`Atmosphere::sky`]
+    /// times the cosine over the upper hemisphere (96 directions, cosine-weighted, each
+    /// marched in 32 steps). Zero without air; it fades through twilight as the air above
+    /// loses the Sun.
+    pub fn ground_sky_irradiance(&self, tables: &AtmosphereTables, mu_s: f64) -> DVec3 {
+        const RINGS: u32 = 8;
+        const AZIMUTHS: u32 = 12;
+        if self.is_none() {
+            return DVec3::ZERO;
+        }
+        let mu_s = mu_s.clamp(-1.0, 1.0);
+        let sun = DVec3::new((1.0 - mu_s * mu_s).sqrt(), 0.0, mu_s);
+        let mut sum = DVec3::ZERO;
+        for i in 0..RINGS {
+            // Cosine-weighted rings: sin^2 of the zenith angle uniform.
+            let sin2 = (f64::from(i) + 0.5) / f64::from(RINGS);
+            let (sin, cos) = (sin2.sqrt(), (1.0 - sin2).sqrt());
+            for j in 0..AZIMUTHS {
+                let phi = (f64::from(j) + 0.5) / f64::from(AZIMUTHS) * std::f64::consts::TAU;
+                let view = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+                sum += self
+                    .sky_marched(tables, 0.0, view, sun, f64::INFINITY, 32)
+                    .0;
+            }
+        }
+        sum * (std::f64::consts::PI / f64::from(RINGS * AZIMUTHS))
+    }
+
+    fn sky_marched(
+        &self,
+        tables: &AtmosphereTables,
+        h: f64,
+        view: DVec3,
+        sun: DVec3,
+        max_distance: f64,
+        steps: u32,
+    ) -> (DVec3, DVec3) {
         let (mut start, mut end) = (0.0_f64, max_distance);
         // Only the stretch inside the air counts.
         let r = self.bottom_radius_m + h;
@@ -364,11 +405,10 @@ impl Atmosphere {
         let cos = view.dot(sun);
         let rayleigh_phase = 3.0 / (16.0 * std::f64::consts::PI) * (1.0 + cos * cos);
         let mie_phase = cornette_shanks(self.mie_g, cos);
-        const STEPS: u32 = 400;
-        let dt = (end - start) / f64::from(STEPS);
+        let dt = (end - start) / f64::from(steps);
         let mut through = DVec3::ONE;
         let mut light = DVec3::ZERO;
-        for i in 0..STEPS {
+        for i in 0..steps {
             let t = start + (f64::from(i) + 0.5) * dt;
             let (ht, up) = self.point(h, view, t);
             if ht >= self.thickness_m {
@@ -496,13 +536,22 @@ pub fn cornette_shanks(g: f64, cos: f64) -> f64 {
     k * (1.0 + cos * cos) / (1.0 + g * g - 2.0 * g * cos).powf(1.5)
 }
 
-/// Both tables, built together.
+/// Entries of [`AtmosphereTables::sky_irradiance`].
+pub const SKY_IRRADIANCE_SIZE: usize = 32;
+/// The Sun's cosine from the zenith at the table's first entry (about 17 degrees below the
+/// horizon, where twilight has gone); below it the sky sends nothing.
+pub const SKY_IRRADIANCE_MIN_MU: f64 = -0.3;
+
+/// The tables, built together.
 #[derive(Clone, Debug)]
 pub struct AtmosphereTables {
     /// Transmittance to the top of the air.
     pub transmittance: TransmittanceLut,
     /// Multiply scattered light.
     pub multiple_scattering: MultipleScatteringLut,
+    /// The sky's light on level ground ([`Atmosphere::ground_sky_irradiance`]) for the Sun's
+    /// cosine from [`SKY_IRRADIANCE_MIN_MU`] to 1 in even steps.
+    pub sky_irradiance: Vec<DVec3>,
 }
 
 impl AtmosphereTables {
@@ -510,11 +559,36 @@ impl AtmosphereTables {
     pub fn new(atmosphere: &Atmosphere) -> Self {
         let transmittance = atmosphere.transmittance_lut();
         let multiple_scattering = atmosphere.multiple_scattering_lut(&transmittance);
-        Self {
+        let mut tables = Self {
             transmittance,
             multiple_scattering,
-        }
+            sky_irradiance: Vec::new(),
+        };
+        tables.sky_irradiance = (0..SKY_IRRADIANCE_SIZE)
+            .map(|i| atmosphere.ground_sky_irradiance(&tables, sky_irradiance_mu(i)))
+            .collect();
+        tables
     }
+
+    /// The sky's light on level ground with the Sun at cosine `mu_s` from the zenith,
+    /// interpolated in the table (zero below [`SKY_IRRADIANCE_MIN_MU`]).
+    pub fn sky_irradiance_at(&self, mu_s: f64) -> DVec3 {
+        let n = self.sky_irradiance.len();
+        if n == 0 || mu_s < SKY_IRRADIANCE_MIN_MU {
+            return DVec3::ZERO;
+        }
+        let x = ((mu_s.min(1.0) - SKY_IRRADIANCE_MIN_MU) / (1.0 - SKY_IRRADIANCE_MIN_MU))
+            * (n - 1) as f64;
+        let i = (x.floor() as usize).min(n.saturating_sub(2));
+        let f = (x - i as f64).clamp(0.0, 1.0);
+        self.sky_irradiance[i].lerp(self.sky_irradiance[(i + 1).min(n - 1)], f)
+    }
+}
+
+/// The Sun's cosine from the zenith at entry `i` of [`AtmosphereTables::sky_irradiance`].
+pub fn sky_irradiance_mu(i: usize) -> f64 {
+    SKY_IRRADIANCE_MIN_MU
+        + (1.0 - SKY_IRRADIANCE_MIN_MU) * i as f64 / (SKY_IRRADIANCE_SIZE - 1) as f64
 }
 
 /// Maps a texel coordinate to 0..1 so that texel centres land on 0 and 1 exactly
@@ -715,6 +789,49 @@ mod tests {
         }
         // Through the horizon from the ground the air takes nearly all the blue.
         assert!(lut.sample(0.0, 0.0).z < 0.01);
+    }
+
+    #[test]
+    fn the_sky_lights_the_ground_bluish_by_day_and_fades_through_twilight() {
+        let a = earth();
+        let tables = AtmosphereTables::new(&a);
+        let mean = |v: DVec3| v.element_sum() / 3.0;
+        let e = |mu: f64| tables.sky_irradiance_at(mu);
+        // Noon: skylight is blue (Rayleigh) and a clear sky's diffuse light on level ground
+        // is 10-25 % of the light on it (measured broadband ratios are 0.1-0.2 at high Sun).
+        let noon = e(1.0);
+        let direct = a.transmittance_to_top(0.0, 1.0);
+        assert!(noon.z > 1.5 * noon.x, "{noon}");
+        let share = mean(noon) / (mean(noon) + mean(direct));
+        assert!(
+            (0.08..0.25).contains(&share),
+            "diffuse share {share} at noon"
+        );
+        // At a 30 degree Sun the sky's share of the light is larger than at noon.
+        let low = e(0.5);
+        let low_share = mean(low) / (mean(low) + 0.5 * mean(a.transmittance_to_top(0.0, 0.5)));
+        assert!(low_share > share, "{low_share} against {share}");
+        // Less light as the Sun sinks, down to nothing once twilight has gone.
+        let series: Vec<f64> = [1.0, 0.5, 0.2, 0.05, 0.0, -0.05, -0.15, -0.29]
+            .iter()
+            .map(|&mu| mean(e(mu)))
+            .collect();
+        assert!(series.windows(2).all(|w| w[1] < w[0]), "{series:?}");
+        assert!(series[7] < 1e-3 * series[0], "{series:?}");
+        assert_eq!(e(-0.5), DVec3::ZERO);
+        // The table reads back the integral between its entries.
+        let exact = a.ground_sky_irradiance(&tables, 0.37);
+        assert!(
+            ((e(0.37) - exact).abs() / exact).max_element() < 0.03,
+            "{} against {exact}",
+            e(0.37)
+        );
+        // No air, no skylight.
+        let none = Atmosphere::none(&Ellipsoid::WGS84);
+        assert_eq!(
+            AtmosphereTables::new(&none).sky_irradiance_at(1.0),
+            DVec3::ZERO
+        );
     }
 
     #[test]

@@ -24,7 +24,8 @@ mod view;
 
 pub use atmosphere::{
     Atmosphere, AtmosphereTables, LutGeometry, MULTIPLE_SCATTERING_SIZE, MultipleScatteringLut,
-    TRANSMITTANCE_SIZE, TransmittanceLut, cornette_shanks,
+    SKY_IRRADIANCE_MIN_MU, SKY_IRRADIANCE_SIZE, TRANSMITTANCE_SIZE, TransmittanceLut,
+    cornette_shanks, sky_irradiance_mu,
 };
 pub use bounds::{BoundingSphere, OrientedBox};
 pub use cartographic::Cartographic;

@@ -8,7 +8,7 @@
 use std::sync::{Arc, Mutex};
 
 use bytemuck::{Pod, Zeroable};
-use globus_geo::{Atmosphere, AtmosphereTables};
+use globus_geo::{Atmosphere, AtmosphereTables, SKY_IRRADIANCE_SIZE};
 
 use crate::globe::{fragment_sampler, fragment_texture};
 
@@ -25,10 +25,21 @@ pub(crate) struct AtmosphereUniforms {
     pub(crate) ozone: [f32; 4],
     pub(crate) shell: [f32; 4],
     pub(crate) stretch: [f32; 4],
+    /// The sky's light on level ground by the Sun's cosine from the zenith
+    /// ([`AtmosphereTables::sky_irradiance`], rgb; zero without air).
+    pub(crate) sky_irradiance: [[f32; 4]; SKY_IRRADIANCE_SIZE],
 }
 
 impl AtmosphereUniforms {
-    pub(crate) fn new(a: &Atmosphere) -> Self {
+    pub(crate) fn new(a: &Atmosphere, tables: Option<&AtmosphereTables>) -> Self {
+        let mut sky_irradiance = [[0.0; 4]; SKY_IRRADIANCE_SIZE];
+        for (out, e) in sky_irradiance
+            .iter_mut()
+            .zip(tables.iter().flat_map(|t| t.sky_irradiance.iter()))
+        {
+            let e = e.as_vec3();
+            *out = [e.x, e.y, e.z, 0.0];
+        }
         let stretch = a.stretch().as_vec3();
         let (r, o) = (
             a.rayleigh_scattering.as_vec3(),
@@ -52,6 +63,7 @@ impl AtmosphereUniforms {
                 (t.max(1.0) * (2.0 * a.bottom_radius_m + t.max(1.0))).sqrt() as f32,
             ],
             stretch: [stretch.x, stretch.y, stretch.z, SUN_ILLUMINANCE],
+            sky_irradiance,
         }
     }
 }
@@ -73,18 +85,13 @@ impl AirResources {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let tables = (!atmosphere.is_none()).then(|| tables_for(&atmosphere));
         queue.write_buffer(
             &uniforms,
             0,
-            bytemuck::bytes_of(&AtmosphereUniforms::new(&atmosphere)),
+            bytemuck::bytes_of(&AtmosphereUniforms::new(&atmosphere, tables.as_deref())),
         );
-        let (transmittance, multiple_scattering) = if atmosphere.is_none() {
-            (
-                table(device, queue, "transmittance", 1, 1, &[[1.0; 4]]),
-                table(device, queue, "multiple scattering", 1, 1, &[[0.0; 4]]),
-            )
-        } else {
-            let tables = tables_for(&atmosphere);
+        let (transmittance, multiple_scattering) = if let Some(tables) = &tables {
             let t = &tables.transmittance;
             let m = &tables.multiple_scattering;
             (
@@ -97,6 +104,11 @@ impl AirResources {
                     m.size,
                     &m.data,
                 ),
+            )
+        } else {
+            (
+                table(device, queue, "transmittance", 1, 1, &[[1.0; 4]]),
+                table(device, queue, "multiple scattering", 1, 1, &[[0.0; 4]]),
             )
         };
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {

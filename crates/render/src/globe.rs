@@ -58,7 +58,8 @@ struct DrawIndexedArgs {
 pub struct Lighting {
     /// Unit vector towards the sun, ECEF axes.
     pub sun_direction: DVec3,
-    /// Light on faces turned away from the sun, 0..1.
+    /// The least light on faces turned away from the sun, 0..1: a floor under the sky's own
+    /// light (skylight from the air's tables, which is nothing without air or at night).
     pub ambient: f32,
     /// Brightness of light scattered by the air, 1 physical (0: the air only dims).
     pub inscatter_gain: f32,
@@ -68,10 +69,13 @@ pub struct Lighting {
 
 impl Lighting {
     /// The real Sun at `unix_s` seconds since 1970-01-01 00:00 UTC
-    /// ([`globus_geo::SunPosition`]): the night side is lit by the ambient term alone.
+    /// ([`globus_geo::SunPosition`]), with no ambient floor: the ground is lit by the Sun
+    /// and the sky, which fades through twilight, so the night side is dark but for its
+    /// lights.
     pub fn at_time(unix_s: f64) -> Self {
         Self {
             sun_direction: globus_geo::SunPosition::at(unix_s).direction(),
+            ambient: 0.0,
             ..Self::sun_over(0.0, 0.0)
         }
     }
@@ -1060,6 +1064,10 @@ mod tests {
                 ("ozone", offset_of!(AtmosphereUniforms, ozone)),
                 ("shell", offset_of!(AtmosphereUniforms, shell)),
                 ("stretch", offset_of!(AtmosphereUniforms, stretch)),
+                (
+                    "sky_irradiance",
+                    offset_of!(AtmosphereUniforms, sky_irradiance),
+                ),
             ],
         );
         check_in(

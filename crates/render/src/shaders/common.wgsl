@@ -68,6 +68,25 @@ struct Atmosphere {
     // xyz: the per-axis stretch from ECEF; w: the Sun's illuminance (pi lights a white
     // Lambertian ground facing it to 1).
     stretch: vec4<f32>,
+    // The sky's light on level ground (rgb, for a Sun of illuminance 1) by the Sun's cosine
+    // from the zenith, from SKY_MIN_MU to 1 in even steps (`AtmosphereTables::sky_irradiance`).
+    sky_irradiance: array<vec4<f32>, 32>,
+}
+
+const SKY_MIN_MU: f32 = -0.3;
+
+// The sky's light on level ground with the Sun at cosine `mu_s` from the zenith, in the
+// shading's units (as the Sun's own term: the table's value times the Sun's illuminance
+// over pi).
+fn sky_irradiance(mu_s: f32) -> vec3<f32> {
+    if (mu_s < SKY_MIN_MU) {
+        return vec3<f32>(0.0);
+    }
+    let x = (min(mu_s, 1.0) - SKY_MIN_MU) / (1.0 - SKY_MIN_MU) * 31.0;
+    let i = min(u32(x), 30u);
+    let f = clamp(x - f32(i), 0.0, 1.0);
+    let e = mix(atmosphere.sky_irradiance[i].rgb, atmosphere.sky_irradiance[i + 1u].rgb, f);
+    return e * (atmosphere.stretch.w / PI);
 }
 
 @group(0) @binding(1) var<uniform> atmosphere: Atmosphere;

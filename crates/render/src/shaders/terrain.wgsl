@@ -211,12 +211,18 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     let ground = frame.eye_up_height.xyz * (atmosphere.shell.x + frame.eye_up_height.w)
         + in.eye_offset * atmosphere.stretch.xyz;
     let r = length(ground);
-    let sunlight = sun_light(r - atmosphere.shell.x, dot(ground, air_sun()) / r);
+    let mu_s = dot(ground, air_sun()) / r;
+    let sunlight = sun_light(r - atmosphere.shell.x, mu_s);
+    // Skylight: what the sky sends onto level ground, on a face tilted away from the zenith
+    // the part of the sky it still sees ((1 + cos tilt) / 2). The ambient term is a floor
+    // under it (0 for the real Sun: the night side is dark but for its lights).
+    let up = ground / r;
+    let sky = sky_irradiance(mu_s) * (0.5 + 0.5 * dot(n, up));
     // Sun glint on water (Blinn-Phong).
     let h = normalize(sun + view);
     let glint = water * pow(max(dot(n, h), 0.0), 200.0) * 0.35 * step(0.0, dot(n, sun));
-    var colour = albedo * (ambient + (1.0 - ambient) * diffuse * sunlight) + glint * sunlight
-        + night_light(in.eye_offset, dist, texel.a);
+    var colour = albedo * (max(vec3<f32>(ambient), sky) + (1.0 - ambient) * diffuse * sunlight)
+        + glint * sunlight + night_light(in.eye_offset, dist, texel.a);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
     var haze: Air;
     if (is_ortho()) {
