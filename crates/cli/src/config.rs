@@ -34,6 +34,9 @@
 //! subdomains = ["a", "b", "c"]
 //! maxzoom = 19
 //!
+//! [night_imagery]         # city lights where the Sun is down (read whole at start)
+//! url = "./night"           # e.g. earth-night-4096x2048.jpg tiled by `globus tile imagery`
+//!
 //! [vector_style]          # defaults for features without these properties
 //! stroke = "#ffcc00"
 //! stroke-width = 2
@@ -89,6 +92,8 @@ pub struct Config {
     /// Imagery layers, bottom first.
     #[serde(default)]
     pub imagery: Vec<SourceSpec>,
+    /// City lights on the night side, from an imagery pyramid (`--night-imagery` wins).
+    pub night_imagery: Option<SourceSpec>,
     /// Style defaults of vector features (simplestyle keys and Globus's own).
     #[serde(default)]
     pub vector_style: BTreeMap<String, toml::Value>,
@@ -355,6 +360,9 @@ impl Config {
         for spec in &self.imagery {
             builder.imagery(spec.clone());
         }
+        if let Some(spec) = &self.night_imagery {
+            builder.night_imagery(Some(spec.clone()));
+        }
     }
 }
 
@@ -395,6 +403,8 @@ mod tests {
             [[imagery]]
             url = "https://{s}.i.example/{z}/{x}/{y}.jpg"
             subdomains = ["a", "b"]
+            [night_imagery]
+            url = "./night"
             "#,
         )
         .expect("valid");
@@ -428,6 +438,10 @@ mod tests {
         assert_eq!(
             o.imagery_layers()[0].subdomains.as_deref(),
             Some(&["a".to_string(), "b".to_string()][..])
+        );
+        assert_eq!(
+            o.night_imagery_source().map(|s| s.url.as_str()),
+            Some("./night")
         );
     }
 

@@ -220,6 +220,11 @@ impl GlobeBuilder {
         self
     }
 
+    /// The pyramid [`GlobeBuilder::night_imagery`] names, if any.
+    pub fn night_imagery_source(&self) -> Option<&SourceSpec> {
+        self.night_imagery.as_ref()
+    }
+
     /// The night lights [`GlobeBuilder::night_imagery`] names, read now (or those set with
     /// [`GlobeBuilder::night_lights`]).
     pub fn open_night_lights(&self) -> Result<Option<Arc<NightLights>>, EngineError> {
