@@ -792,6 +792,13 @@ impl Globe {
         let settled = loop {
             let sse_before = self.selection_options.max_sse_px;
             let report = self.update(view);
+            // Nothing is drawn while settling, so nothing else would submit this frame's
+            // uploads: their staging copies would pile up frame after frame (gigabytes when
+            // a tight budget evicts and uploads tiles again).
+            if report.pool.uploaded_this_frame > 0 {
+                self.queue.submit([]);
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+            }
             on_frame(&report);
             if report.is_complete() {
                 break (report, true);
