@@ -789,9 +789,32 @@ impl Globe {
         let fade = self.renderer.colour_fade();
         self.renderer.set_colour_fade(Duration::ZERO);
         let mut stalled = 0;
+        // A pool whose vertex room holds fewer of the wanted tiles than a split needs evicts
+        // one wanted tile for another, frame after frame, without ever being full: when
+        // tiles are evicted for CHURN_FRAMES frames and the wanted count reaches no new
+        // low, detail drops as if the pool were full.
+        const CHURN_FRAMES: u32 = 8;
+        let (mut churn, mut least_wanted) = (0, u32::MAX);
+        let mut evicted_before = self.renderer.pool().stats().evicted_total;
         let settled = loop {
             let sse_before = self.selection_options.max_sse_px;
             let report = self.update(view);
+            let evicted = report.pool.evicted_total.saturating_sub(evicted_before);
+            evicted_before = report.pool.evicted_total;
+            if report.wanted < least_wanted || report.sse_bound_px != sse_before {
+                least_wanted = report.wanted;
+                churn = 0;
+            } else if evicted > 0 {
+                churn += 1;
+                if churn > CHURN_FRAMES {
+                    tracing::debug!(
+                        wanted = report.wanted,
+                        "tiles evicted for tiles frame after frame: less detail"
+                    );
+                    self.selection_options.max_sse_px *= 1.25;
+                    (churn, least_wanted) = (0, u32::MAX);
+                }
+            }
             // Nothing is drawn while settling, so nothing else would submit this frame's
             // uploads: their staging copies would pile up frame after frame (gigabytes when
             // a tight budget evicts and uploads tiles again).
