@@ -15,7 +15,18 @@ use globus_engine::{
 const TIMEOUT: Duration = Duration::from_secs(240);
 
 fn render(name: &str, cam: CameraSpec, width: u32, height: u32) -> (RenderedFrame, View) {
-    let mut off = Headless::new(&GlobeBuilder::new(), width, height).expect("a GPU or lavapipe");
+    render_with(&GlobeBuilder::new(), name, cam, width, height)
+}
+
+/// [`render`] with a globe of `builder`'s options.
+fn render_with(
+    builder: &GlobeBuilder,
+    name: &str,
+    cam: CameraSpec,
+    width: u32,
+    height: u32,
+) -> (RenderedFrame, View) {
+    let mut off = Headless::new(builder, width, height).expect("a GPU or lavapipe");
     let view = cam.view(off.globe(), 60.0, width, height);
     let frame = off
         .render_complete(&view, TIMEOUT, &mut [])
@@ -677,14 +688,7 @@ fn the_ground_has_its_colour_whatever_the_number_of_tile_slots() {
     for slots in [301, 300] {
         let mut builder = GlobeBuilder::new();
         builder.gpu_tiles(slots);
-        let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
-        let view = cam.view(off.globe(), 60.0, w, h);
-        let frame = off
-            .render_complete(&view, TIMEOUT, &mut [])
-            .expect("render");
-        let dir = globus_test_support::output_dir("rendering");
-        save_png(&frame.image, &dir.join(format!("slots_{slots}.png"))).expect("save");
-        assert!(frame.complete, "{slots} slots: still loading");
+        let (frame, _) = render_with(&builder, &format!("slots_{slots}"), cam, w, h);
         ground.push(mean_brightness(&frame.image, (0, w), (h * 3 / 4, h)));
     }
     assert!(
