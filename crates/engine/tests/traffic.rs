@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use globus_engine::traffic::{AircraftKind, Batch, Sample, callsign_bytes};
 use globus_engine::{
-    Cartographic, DVec2, Globe, Headless, RgbaImage, StyleRules, TrafficLayer, VectorLayer, View,
-    save_png,
+    Cartographic, DVec2, DVec3, Globe, Headless, RgbaImage, StyleRules, TrafficLayer, VectorLayer,
+    View, save_png,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(300);
@@ -658,20 +658,32 @@ fn a_mountain_hides_an_aircraft_and_its_label() {
         .render_complete(&view, TIMEOUT, &mut [])
         .expect("render")
         .image;
-    // Along the view, find a point 2 km past the first terrain the line of sight meets:
-    // hidden. And one in the sky above it: seen.
+    // On a ray at or a little above the line of sight, past the first terrain it meets, find
+    // the first point at least 1 km further that is in the open air, 100 m above the ground:
+    // hidden by the mountain (an aircraft below the ground would be drawn on it). And one in
+    // the sky above it: seen.
     let eye = view.position;
     let ahead = view.forward();
-    let hit = off
-        .globe()
-        .ray_pick(eye, ahead)
-        .expect("the line of sight meets a mountain");
-    let d = (hit - eye).length();
-    assert!(d > 500.0, "the mountain is {d} m away");
-    let hidden_at = eye + ahead * (d + 2_000.0);
-    // Ten degrees above the line of sight, 6 km out, with nothing in front of it.
     let up = off.globe().ellipsoid().geodetic_normal(eye).expect("up");
-    let raised = (ahead * 10f64.to_radians().cos() + up * 10f64.to_radians().sin()).normalize();
+    let tilted =
+        |deg: f64| (ahead * deg.to_radians().cos() + up * deg.to_radians().sin()).normalize();
+    let place = |p| off.globe().cartographic(p).expect("on the body");
+    let behind = |ray: DVec3| {
+        let d = (off.globe().ray_pick(eye, ray)? - eye).length();
+        (0..200)
+            .map(|k| eye + ray * (d + 1_000.0 + 50.0 * f64::from(k)))
+            .find(|p| {
+                let c = place(*p);
+                c.height_m > off.globe().ground_height_m(c.lon_rad, c.lat_rad) + 100.0
+            })
+            .map(|p| (d, p))
+    };
+    let (d, hidden_at) = (0..16)
+        .find_map(|k| behind(tilted(0.5 * f64::from(k))))
+        .expect("a mountain with open air behind it ahead");
+    assert!(d > 500.0, "the mountain is {d} m away");
+    // Ten degrees above the line of sight, 6 km out, with nothing in front of it.
+    let raised = tilted(10.0);
     let seen_at = eye + raised * 6_000.0;
     assert!(
         off.globe()
@@ -679,7 +691,6 @@ fn a_mountain_hides_an_aircraft_and_its_label() {
             .is_none_or(|p| (p - eye).length() > 6_000.0),
         "the open aircraft is hidden too"
     );
-    let place = |p| off.globe().cartographic(p).expect("on the body");
     let (hc, sc) = (place(hidden_at), place(seen_at));
     let mut layer = TrafficLayer::new();
     let mut batch = Batch::default();

@@ -25,7 +25,7 @@ use globus_tiling::{GLOBE_SCHEME, GeoRect, TileKey};
 
 use crate::biome::{self, Surface};
 use crate::grid::{COLOUR_SIZE, HEIGHT_GRID_SIDE, MESH_SEGMENTS, interpolate_in_cell};
-use crate::planet::{Fields, ProceduralPlanet, Relief};
+use crate::planet::{Drainage, Fields, ProceduralPlanet, Relief};
 use crate::tile::{ColourImage, TerrainTile, height_range};
 
 /// Fine samples per mesh cell.
@@ -52,6 +52,8 @@ struct Coarse {
     patches: f64,
     /// Sum of the coarse relief octaves, metres.
     relief_m: f64,
+    /// Their drainage (see [`ProceduralPlanet::relief_term`]).
+    drainage: Drainage,
     /// Colour texture from the coarse detail octaves (see [`texture_weight`]).
     texture: f64,
 }
@@ -66,11 +68,14 @@ impl Coarse {
             out.fields.moisture += w * c.fields.moisture;
             out.patches += w * c.patches;
             out.relief_m += w * c.relief_m;
+            out.drainage.gradient += w * c.drainage.gradient;
+            out.drainage.bend += w * c.drainage.bend;
             out.texture += w * c.texture;
         }
         // Cubic interpolation can overshoot slightly; weights stay non-negative.
         out.fields.mountains = out.fields.mountains.max(0.0);
         out.fields.roughness = out.fields.roughness.max(0.0);
+        out.drainage.bend = out.drainage.bend.max(0.0);
         out
     }
 }
@@ -171,19 +176,20 @@ impl ProceduralPlanet {
         let mut micro = vec![0.0; FINE_SIDE * FINE_SIDE];
         for (idx, pt) in fine_pts.iter().enumerate() {
             let c = &fine_coarse[idx];
-            let (fine_m, texture) = self.fine_relief(&plan, &c.fields, pt.surface);
+            let (fine_m, texture) = self.fine_relief(&plan, c, pt.surface);
             raw[idx] = c.fields.base_m + c.relief_m + fine_m;
             micro[idx] = (c.texture + texture).clamp(-1.0, 1.0);
         }
         let heights_m = self.mesh_heights(&coarse, &coarse_pts, &raw, &plan);
         let rendered: Vec<f64> = raw.iter().map(|h| h.max(0.0)).collect();
-        let max_weight = coarse
-            .iter()
-            .map(|c| c.fields.roughness.max(c.fields.mountains))
-            .fold(0.0, f64::max);
+        let max_weights = coarse.iter().fold(Fields::default(), |m, c| Fields {
+            mountains: m.mountains.max(c.fields.mountains),
+            roughness: m.roughness.max(c.fields.roughness),
+            ..m
+        });
         let mesh_error = mesh_deviation(&heights_m, &rendered);
         let bulge = crate::grid::mesh_bulge_m(self.ellipsoid(), &rect);
-        let omitted = self.omitted_amplitude_m(plan.finest_m, max_weight);
+        let omitted = self.omitted_amplitude_m(plan.finest_m, &max_weights);
         let colour = self.colour_image(&fine_pts, &fine_coarse, &raw, &rendered, &micro);
         let (min_h, max_h) = height_range(&heights_m);
         TerrainTile {
@@ -234,31 +240,43 @@ impl ProceduralPlanet {
         pts.iter()
             .map(|pt| {
                 let fields = self.fields(pt.surface);
-                let (relief_m, texture) = self.relief_sum(&plan.coarse, &fields, pt.surface);
+                let mut drainage = Drainage::default();
+                let (relief_m, texture) =
+                    self.relief_sum(&plan.coarse, &fields, pt.surface, &mut drainage);
                 Coarse {
                     fields,
                     patches: self.patches(pt.surface) * plan.patch_weight,
                     relief_m,
+                    drainage,
                     texture,
                 }
             })
             .collect()
     }
 
-    /// Relief (metres) and colour texture of the fine octaves at `p`.
+    /// Relief (metres) and colour texture of the fine octaves at `p`, continuing the coarse
+    /// octaves' drainage.
     #[inline]
-    fn fine_relief(&self, plan: &OctavePlan, fields: &Fields, p: DVec3) -> (f64, f64) {
-        self.relief_sum(&plan.fine, fields, p)
+    fn fine_relief(&self, plan: &OctavePlan, coarse: &Coarse, p: DVec3) -> (f64, f64) {
+        let mut drainage = coarse.drainage;
+        self.relief_sum(&plan.fine, &coarse.fields, p, &mut drainage)
     }
 
     /// Sum of the given octaves' relief (metres) and colour texture at `p`.
     #[inline]
-    fn relief_sum(&self, octaves: &[(Relief, f64, f64)], fields: &Fields, p: DVec3) -> (f64, f64) {
+    fn relief_sum(
+        &self,
+        octaves: &[(Relief, f64, f64)],
+        fields: &Fields,
+        p: DVec3,
+        drainage: &mut Drainage,
+    ) -> (f64, f64) {
         let mut height = 0.0;
         let mut texture = 0.0;
         for &(r, a, t) in octaves {
-            let shape = self.relief_shape(r, p);
-            height += a * Self::relief_weight(r, fields) * shape;
+            let w = Self::relief_weight(r, fields);
+            let shape = self.relief_term(r, p, a, w, drainage);
+            height += a * w * shape;
             texture += t * shape;
         }
         (height, texture)
@@ -286,7 +304,7 @@ impl ProceduralPlanet {
                     let c = &coarse[ci];
                     c.fields.base_m
                         + c.relief_m
-                        + self.fine_relief(plan, &c.fields, coarse_pts[ci].surface).0
+                        + self.fine_relief(plan, c, coarse_pts[ci].surface).0
                 };
                 out.push(h.max(0.0) as f32);
             }

@@ -34,5 +34,5 @@ pub const MAX_ABS_HEIGHT_M: f64 = 100_000.0;
 
 pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
 pub use morph::MorphVertex;
-pub use planet::{Fields, ProceduralPlanet, Relief};
+pub use planet::{Drainage, Fields, ProceduralPlanet, Relief};
 pub use tile::{ColourImage, TerrainTile};

@@ -83,23 +83,48 @@ fn floor_split(v: f64) -> (u64, f64) {
     (t as u64, v - t as f64)
 }
 
+/// The lattice cell around a point: its fractional position and the per-axis parts of the
+/// corners' hashes (combined by xor for the eight corners, see [`Cell::hash`]).
+struct Cell {
+    frac: [f64; 3],
+    hx: [u64; 2],
+    hy: [u64; 2],
+    hz: [u64; 2],
+}
+
+impl Cell {
+    #[inline(always)]
+    fn new(p: DVec3, seed: u64) -> Self {
+        let (ix, x) = floor_split(p.x);
+        let (iy, y) = floor_split(p.y);
+        let (iz, z) = floor_split(p.z);
+        Self {
+            frac: [x, y, z],
+            hx: [ix.wrapping_mul(KX), ix.wrapping_add(1).wrapping_mul(KX)],
+            hy: [iy.wrapping_mul(KY), iy.wrapping_add(1).wrapping_mul(KY)],
+            hz: [
+                iz.wrapping_mul(KZ) ^ seed,
+                iz.wrapping_add(1).wrapping_mul(KZ) ^ seed,
+            ],
+        }
+    }
+
+    /// The hash of corner (dx, dy, dz), each 0 or 1.
+    #[inline(always)]
+    fn hash(&self, dx: usize, dy: usize, dz: usize) -> u64 {
+        mix(self.hx[dx] ^ self.hy[dy] ^ self.hz[dz])
+    }
+}
+
 /// Gradient noise at `p` (lattice units) for `seed`.
 #[inline]
 pub fn gradient_noise(p: DVec3, seed: u64) -> f64 {
-    let (ix, x) = floor_split(p.x);
-    let (iy, y) = floor_split(p.y);
-    let (iz, z) = floor_split(p.z);
+    let cell = Cell::new(p, seed);
+    let [x, y, z] = cell.frac;
     let (u, v, w) = (fade(x), fade(y), fade(z));
-    // Per-axis parts of the lattice hash, combined by xor for the eight corners.
-    let hx = [ix.wrapping_mul(KX), ix.wrapping_add(1).wrapping_mul(KX)];
-    let hy = [iy.wrapping_mul(KY), iy.wrapping_add(1).wrapping_mul(KY)];
-    let hz = [
-        iz.wrapping_mul(KZ) ^ seed,
-        iz.wrapping_add(1).wrapping_mul(KZ) ^ seed,
-    ];
     let c = |dx: usize, dy: usize, dz: usize| {
         grad(
-            mix(hx[dx] ^ hy[dy] ^ hz[dz]),
+            cell.hash(dx, dy, dz),
             x - dx as f64,
             y - dy as f64,
             z - dz as f64,
@@ -111,6 +136,91 @@ pub fn gradient_noise(p: DVec3, seed: u64) -> f64 {
     let x11 = lerp(c(0, 1, 1), c(1, 1, 1), u);
     lerp(lerp(x00, x10, v), lerp(x01, x11, v), w)
 }
+
+/// Derivative of [`fade`].
+#[inline(always)]
+fn fade_d(t: f64) -> f64 {
+    30.0 * t * t * (t * (t - 2.0) + 1.0)
+}
+
+/// Gradient noise at `p` (lattice units) for `seed`, with its gradient (per lattice unit).
+/// The value is bit-identical to [`gradient_noise`].
+#[inline]
+pub fn gradient_noise_d(p: DVec3, seed: u64) -> (f64, DVec3) {
+    let cell = Cell::new(p, seed);
+    let [x, y, z] = cell.frac;
+    let (u, v, w) = (fade(x), fade(y), fade(z));
+    // Corner gradients and values.
+    let g = |dx: usize, dy: usize, dz: usize| GRADIENTS[(cell.hash(dx, dy, dz) & 15) as usize];
+    let val = |gr: [f64; 3], dx: usize, dy: usize, dz: usize| {
+        gr[0] * (x - dx as f64) + gr[1] * (y - dy as f64) + gr[2] * (z - dz as f64)
+    };
+    let gs = [
+        g(0, 0, 0),
+        g(1, 0, 0),
+        g(0, 1, 0),
+        g(1, 1, 0),
+        g(0, 0, 1),
+        g(1, 0, 1),
+        g(0, 1, 1),
+        g(1, 1, 1),
+    ];
+    let c: [f64; 8] = std::array::from_fn(|k| val(gs[k], k & 1, (k >> 1) & 1, k >> 2));
+    let x00 = lerp(c[0], c[1], u);
+    let x10 = lerp(c[2], c[3], u);
+    let x01 = lerp(c[4], c[5], u);
+    let x11 = lerp(c[6], c[7], u);
+    let y0 = lerp(x00, x10, v);
+    let y1 = lerp(x01, x11, v);
+    let value = lerp(y0, y1, w);
+    // d/du, d/dv, d/dw with the corner values held, times the fades' derivatives.
+    let du = lerp(
+        lerp(c[1] - c[0], c[3] - c[2], v),
+        lerp(c[5] - c[4], c[7] - c[6], v),
+        w,
+    );
+    let dv = lerp(x10 - x00, x11 - x01, w);
+    let dw = y1 - y0;
+    // Plus the corner gradients, blended by the same weights.
+    let blend = |a: usize| {
+        let x00 = lerp(gs[0][a], gs[1][a], u);
+        let x10 = lerp(gs[2][a], gs[3][a], u);
+        let x01 = lerp(gs[4][a], gs[5][a], u);
+        let x11 = lerp(gs[6][a], gs[7][a], u);
+        lerp(lerp(x00, x10, v), lerp(x01, x11, v), w)
+    };
+    let gradient = DVec3::new(
+        blend(0) + du * fade_d(x),
+        blend(1) + dv * fade_d(y),
+        blend(2) + dw * fade_d(z),
+    );
+    (value, gradient)
+}
+
+/// Unit phasors at 16 angles (k * 22.5 degrees), the random phases of [`Octaves::stripes`].
+const PHASES: [(f64, f64); 16] = {
+    const C1: f64 = 0.923_879_532_511_286_7;
+    const C2: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    const C3: f64 = 0.382_683_432_365_089_8;
+    [
+        (1.0, 0.0),
+        (C1, C3),
+        (C2, C2),
+        (C3, C1),
+        (0.0, 1.0),
+        (-C3, C1),
+        (-C2, C2),
+        (-C1, C3),
+        (-1.0, 0.0),
+        (-C1, -C3),
+        (-C2, -C2),
+        (-C3, -C1),
+        (0.0, -1.0),
+        (C3, -C1),
+        (C2, -C2),
+        (C1, -C3),
+    ]
+};
 
 /// A family of octaves: octave `k` has wavelength `base_wavelength_m / 2^k`, its own rotation,
 /// offset and seed.
@@ -175,6 +285,64 @@ impl Octaves {
         let q = *rot * p + *offset;
         gradient_noise(q, *seed)
     }
+
+    /// Octave `k` at `p` with its gradient (per metre, ECEF).
+    #[inline]
+    pub fn octave_d(&self, k: usize, p: DVec3) -> (f64, DVec3) {
+        let (rot, offset, seed) = &self.transforms[k];
+        let q = *rot * p + *offset;
+        let (n, g) = gradient_noise_d(q, *seed);
+        (n, rot.transpose() * g)
+    }
+
+    /// Stripes of octave `k`'s wavelength at `p` whose crests run across the unit vector
+    /// `dir` (ECEF): a phasor of magnitude at most 1 whose angle grows by a full turn per
+    /// wavelength along `dir`.
+    ///
+    /// Each of the eight lattice corners around `p` carries a plane wave through itself with
+    /// a random phase; the waves are blended with the noise's fade weights. Where `dir`
+    /// turns slowly the stripes stay parallel locally, while their phase wanders over a few
+    /// wavelengths, so stripes begin, end and fork (Johansen's "phacelle" noise, here in 3D
+    /// on the planet's surface). Where the corners' waves disagree the phasor is short; the
+    /// caller fades by its length.
+    #[inline]
+    pub fn stripes(&self, k: usize, p: DVec3, dir: DVec3) -> (f64, f64) {
+        let (rot, offset, seed) = &self.transforms[k];
+        let wavelength = self.wavelength(k);
+        let q = *rot * p + *offset;
+        // The direction in the lattice frame, one wavelength per lattice unit.
+        let e = *rot * dir * wavelength;
+        let cell = Cell::new(q, *seed);
+        let [x, y, z] = cell.frac;
+        let tau = std::f64::consts::TAU;
+        // The wave through corner (0,0,0) at p, and the factor per step to the next corner
+        // along each axis.
+        let (s0, c0) = (tau * (x * e.x + y * e.y + z * e.z)).sin_cos();
+        let (sx, cx) = (-tau * e.x).sin_cos();
+        let (sy, cy) = (-tau * e.y).sin_cos();
+        let (sz, cz) = (-tau * e.z).sin_cos();
+        let mul = |a: (f64, f64), b: (f64, f64)| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
+        let (u, v, w) = (fade(x), fade(y), fade(z));
+        let mut sum = (0.0, 0.0);
+        let mut wz = (c0, s0);
+        for (dz, fz) in [(0usize, 1.0 - w), (1, w)] {
+            let mut wy = wz;
+            for (dy, fy) in [(0usize, 1.0 - v), (1, v)] {
+                let mut wx = wy;
+                for (dx, fx) in [(0usize, 1.0 - u), (1, u)] {
+                    let phase = PHASES[(cell.hash(dx, dy, dz) >> 60) as usize];
+                    let c = mul(wx, phase);
+                    let weight = fx * fy * fz;
+                    sum.0 += weight * c.0;
+                    sum.1 += weight * c.1;
+                    wx = mul(wx, (cx, sx));
+                }
+                wy = mul(wy, (cy, sy));
+            }
+            wz = mul(wz, (cz, sz));
+        }
+        sum
+    }
 }
 
 #[cfg(test)]
@@ -212,6 +380,64 @@ mod tests {
             let b = gradient_noise(DVec3::new(x + e, 0.3, 0.7), 3);
             assert!((a - b).abs() < 1e-7);
         }
+    }
+
+    #[test]
+    fn the_gradient_is_the_derivative_of_the_value() {
+        let o = Octaves::new(4, 900.0, 2);
+        let h = 0.01;
+        for i in 0..200 {
+            let t = f64::from(i);
+            let p = DVec3::new(6_378_137.0 + t * 37.1, (t * 0.7).sin() * 5_000.0, t * 91.3);
+            for k in 0..2 {
+                let (n, g) = o.octave_d(k, p);
+                assert_eq!(n, o.octave(k, p));
+                for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+                    let fd = (o.octave(k, p + axis * h) - o.octave(k, p - axis * h)) / (2.0 * h);
+                    let scale = 1.0 / o.wavelength(k);
+                    assert!(
+                        (fd - g.dot(axis)).abs() < 1e-4 * scale,
+                        "octave {k} at {p}: {fd} vs {}",
+                        g.dot(axis)
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn stripes_turn_once_per_wavelength_across_their_direction() {
+        let o = Octaves::new(8, 500.0, 1);
+        let dir = DVec3::new(0.3, -0.5, 0.8).normalize();
+        let (mut along, mut across, mut n) = (0.0, 0.0, 0);
+        for i in 0..400 {
+            let t = f64::from(i);
+            let p = DVec3::new(6_378_137.0 + t * 113.0, t * 71.0, -t * 29.0);
+            let z = o.stripes(0, p, dir);
+            let len = z.0.hypot(z.1);
+            assert!(len <= 1.0 + 1e-12, "{len}");
+            if len < 0.5 {
+                continue;
+            }
+            // A step of a tenth of a wavelength across turns the phase by 36 degrees, the
+            // same step along the crests hardly at all.
+            let turn = |q: DVec3| {
+                let w = o.stripes(0, q, dir);
+                (z.0 * w.1 - z.1 * w.0).atan2(z.0 * w.0 + z.1 * w.1)
+            };
+            let side = dir.cross(DVec3::new(0.1, 0.9, 0.2)).normalize();
+            along += turn(p + side * 50.0).abs();
+            across += turn(p + dir * 50.0);
+            n += 1;
+        }
+        assert!(n > 100, "{n}");
+        let (along, across) = (along / f64::from(n), across / f64::from(n));
+        let expected = std::f64::consts::TAU / 10.0;
+        assert!(
+            (across - expected).abs() < 0.15 * expected,
+            "{across} vs {expected}"
+        );
+        assert!(along < 0.3 * expected, "{along}");
     }
 
     #[test]

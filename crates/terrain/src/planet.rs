@@ -7,15 +7,27 @@
 //! * fields, smooth at the scale of continents (wavelengths of 300 km and more): a
 //!   domain-warped continent shape that decides land and sea, a mountain-belt mask, a
 //!   hilliness and a moisture field;
-//! * relief octaves: ridged noise for mountain ranges (300 km down to 0.6 km, weighted by the
-//!   mountain mask) and a power-law ("fractal", Hurst exponent 0.7) detail series from 150 km
-//!   down to 0.15 m, weighted by a roughness derived from the fields, so plains stay gentle and
-//!   mountains get crags;
+//! * relief octaves: ridged noise for mountain ranges (300 km down to 4.7 km, weighted by the
+//!   mountain mask); below them gully octaves (3 km down to 23 m, also in the mountains) that
+//!   carve V-shaped gullies running down the slope of everything coarser, each finer one
+//!   down the flanks of the coarser ones, so valleys branch as drainage does (see
+//!   [`ProceduralPlanet::relief_term`]); and a power-law ("fractal", Hurst exponent 0.7)
+//!   detail series from 150 km down to 0.15 m, weighted by a roughness derived from the
+//!   fields, so plains stay gentle and mountains get crags;
 //! * texture octaves below that (7 cm to 1.75 cm), which vary only the colour.
 //!
-//! Because the relief is a plain sum of octaves with known amplitudes, a tile generator can
-//! evaluate each octave at the resolution it needs, and bound exactly how much the octaves it
-//! leaves out could add (see [`ProceduralPlanet::omitted_amplitude_m`]).
+//! Because the relief is a sum of octaves with known amplitudes, a tile generator can evaluate
+//! each octave at the resolution it needs, and bound exactly how much the octaves it leaves
+//! out could add (see [`ProceduralPlanet::omitted_amplitude_m`]). A gully octave's shape also
+//! depends on the coarser octaves' gradient at the same point ([`Drainage`], from analytic
+//! noise derivatives): a function of the point alone, carried from coarse to fine samples
+//! like the heights.
+//!
+//! Why gullies by hand: ridged noise alone gives crests but its basins are isolated pits
+//! (rounded "snow dunes" from 3 km), and a hydraulic erosion pass needs whole heightmaps,
+//! neither per point nor continuous across tiles and levels. Stripes that follow the slope
+//! (Johansen's erosion filter, after his "phacelle" noise) give connected, branching valleys
+//! point by point; no crate offers them over 3D planet coordinates.
 
 use globus_geo::{DVec3, Ellipsoid};
 
@@ -37,12 +49,24 @@ const TEXTURE_OCTAVES: usize = 3;
 const RIDGE_BASE_M: f64 = 300_000.0;
 /// Amplitude of the largest ridge octave, metres.
 const RIDGE_AMPLITUDE_M: f64 = 5_200.0;
-/// Amplitude ratio between successive ridge octaves. The finest ridges set the slopes:
-/// 0.67 puts 21-27 % of the highest ranges' area above 30 degrees at 30 m spacing (real
-/// alpine terrain: 20-30 %); 0.65 gave 9-13 %, 0.70 gives 46-52 %.
+/// Amplitude ratio between successive ridge octaves.
 const RIDGE_GAIN: f64 = 0.67;
-/// Number of ridge octaves (down to 0.6 km).
-const RIDGE_OCTAVES: usize = 10;
+/// Number of ridge octaves (down to 4.7 km; the gullies carve below that).
+const RIDGE_OCTAVES: usize = 7;
+/// Wavelength (stripe spacing) of the largest gully octave, metres.
+const GULLY_BASE_M: f64 = 3_000.0;
+/// Number of gully octaves (down to 23 m).
+const GULLY_OCTAVES: usize = 8;
+/// Amplitude of a gully octave as a fraction of its wavelength: its flanks rise at 4 x this
+/// (19 degrees) across the slope they run down. The gullies set the slopes: 0.085 puts
+/// 26-38 % of the highest ranges' area above 30 degrees at 30 m spacing (real alpine
+/// terrain: 20-30 %; see the README); 0.06 gave 13 %.
+const GULLY_DEPTH: f64 = 0.085;
+/// Slope (m/m) at which gullies reach full depth; gentler ground gets shallower ones.
+const GULLY_FULL_SLOPE: f64 = 0.15;
+/// Turn of the drainage direction within one wavelength (radians) at which a gully octave
+/// has faded to half.
+const GULLY_MAX_TURN: f64 = 4.0;
 /// The ridge shape `(1 - |n|)^2 - RIDGE_BIAS` lies in `[-RIDGE_BIAS, 1 - RIDGE_BIAS]`.
 const RIDGE_BIAS: f64 = 0.55;
 
@@ -59,11 +83,24 @@ pub struct Fields {
     pub moisture: f64,
 }
 
+/// What the gully octaves follow at a point: the ridge and gully octaves coarser than the
+/// one being evaluated, summed as they are weighted (see [`ProceduralPlanet::relief_term`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Drainage {
+    /// Their gradient, m/m (ECEF; only its part along the surface matters).
+    pub gradient: DVec3,
+    /// An estimate of how fast that gradient changes (the size of its derivative), 1/m.
+    pub bend: f64,
+}
+
 /// One octave of relief, and how it is weighted by the fields.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Relief {
     /// Ridge octave `k`, weighted by [`Fields::mountains`].
     Ridge(usize),
+    /// Gully octave `k`, weighted by [`Fields::mountains`]: stripes running down the slope
+    /// of the coarser ridges and gullies (see [`ProceduralPlanet::relief_term`]).
+    Gully(usize),
     /// Detail octave `k`, weighted by [`Fields::roughness`].
     Detail(usize),
     /// Texture octave `k`: below the finest relief, it varies only the ground colour (grain,
@@ -83,6 +120,7 @@ pub struct ProceduralPlanet {
     hilliness: Octaves,
     moisture: Octaves,
     ridges: Octaves,
+    gullies: Octaves,
     detail: Octaves,
     colour: Octaves,
     texture: Octaves,
@@ -115,6 +153,7 @@ impl ProceduralPlanet {
             hilliness: Octaves::new(s(7), 1_500_000.0, 2),
             moisture: Octaves::new(s(8), 4_000_000.0, 2),
             ridges: Octaves::new(s(9), RIDGE_BASE_M, RIDGE_OCTAVES),
+            gullies: Octaves::new(s(13), GULLY_BASE_M, GULLY_OCTAVES),
             detail: Octaves::new(s(10), DETAIL_BASE_M, DETAIL_OCTAVES),
             colour: Octaves::new(s(11), 8_000.0, 2),
             texture: Octaves::new(s(12), TEXTURE_BASE_M, TEXTURE_OCTAVES),
@@ -141,10 +180,13 @@ impl ProceduralPlanet {
         let ridges: f64 = (0..RIDGE_OCTAVES)
             .map(|k| self.amplitude_m(Relief::Ridge(k)))
             .sum();
+        let gullies: f64 = (0..GULLY_OCTAVES)
+            .map(|k| self.amplitude_m(Relief::Gully(k)))
+            .sum();
         let detail: f64 = (0..DETAIL_OCTAVES)
             .map(|k| self.amplitude_m(Relief::Detail(k)))
             .sum();
-        BASE_LAND_M + ridges * (1.0 - RIDGE_BIAS) + detail * MAX_ROUGHNESS * NOISE_BOUND
+        BASE_LAND_M + ridges * (1.0 - RIDGE_BIAS) + gullies + detail * MAX_ROUGHNESS * NOISE_BOUND
     }
 
     /// The continent-scale fields at a surface point.
@@ -184,10 +226,12 @@ impl ProceduralPlanet {
         }
     }
 
-    /// All relief octaves, coarsest first.
+    /// All relief octaves; ridge and gully octaves coarsest first, as
+    /// [`ProceduralPlanet::relief_term`] needs them.
     pub fn relief_octaves(&self) -> impl Iterator<Item = Relief> + use<> {
         (0..RIDGE_OCTAVES)
             .map(Relief::Ridge)
+            .chain((0..GULLY_OCTAVES).map(Relief::Gully))
             .chain((0..DETAIL_OCTAVES).map(Relief::Detail))
             .chain((0..TEXTURE_OCTAVES).map(Relief::Texture))
     }
@@ -196,6 +240,7 @@ impl ProceduralPlanet {
     pub fn wavelength_m(&self, r: Relief) -> f64 {
         match r {
             Relief::Ridge(k) => self.ridges.wavelength(k),
+            Relief::Gully(k) => self.gullies.wavelength(k),
             Relief::Detail(k) => self.detail.wavelength(k),
             Relief::Texture(k) => self.texture.wavelength(k),
         }
@@ -205,6 +250,7 @@ impl ProceduralPlanet {
     pub fn amplitude_m(&self, r: Relief) -> f64 {
         match r {
             Relief::Ridge(k) => RIDGE_AMPLITUDE_M * RIDGE_GAIN.powi(k as i32),
+            Relief::Gully(k) => GULLY_DEPTH * self.gullies.wavelength(k),
             Relief::Detail(k) => {
                 DETAIL_AMPLITUDE_M * (self.detail.wavelength(k) / DETAIL_BASE_M).powf(DETAIL_HURST)
             }
@@ -212,14 +258,75 @@ impl ProceduralPlanet {
         }
     }
 
-    /// The unweighted shape of a relief octave at `p` (multiply by the amplitude and the
-    /// field weight, see [`ProceduralPlanet::relief_weight`]).
+    /// The unweighted shape of relief octave `r` at `p`, in [-1, 1] (multiply by its
+    /// amplitude `amplitude_m` and its field weight `weight`, see
+    /// [`ProceduralPlanet::relief_weight`]).
+    ///
+    /// `drainage` describes the ridge and gully octaves coarser than `r` at `p` (see
+    /// [`Drainage`]); ridge and gully octaves add themselves to it, so call this for the
+    /// octaves in [`ProceduralPlanet::relief_octaves`] order, starting from
+    /// `Drainage::default()`. A gully octave follows it: its stripes run down the drainage
+    /// slope, cross-sections are a sharp crest and a V-shaped gully (a triangle wave), and it
+    /// fades in as the slope steepens. Each finer gully octave runs down the flanks of the
+    /// coarser gullies, so the gullies branch as drainage does (in the manner of Johansen's
+    /// erosion filter). Everything is a function of `p` alone, which keeps every octave
+    /// deterministic and continuous.
     #[inline]
-    pub fn relief_shape(&self, r: Relief, p: DVec3) -> f64 {
+    pub fn relief_term(
+        &self,
+        r: Relief,
+        p: DVec3,
+        amplitude_m: f64,
+        weight: f64,
+        drainage: &mut Drainage,
+    ) -> f64 {
         match r {
             Relief::Ridge(k) => {
-                let n = self.ridges.octave(k, p);
-                (1.0 - n.abs()).powi(2) - RIDGE_BIAS
+                let (n, g) = self.ridges.octave_d(k, p);
+                let crest = 1.0 - n.abs();
+                // The crest's kink is rounded in the drainage slope (n / (|n| + e) for the
+                // sign), or finer gullies would turn abruptly across it; it still turns fast
+                // there, which the bend records.
+                let e = 0.05;
+                let side = n / (n.abs() + e);
+                let a = amplitude_m * weight;
+                drainage.gradient += g * (-2.0 * crest * side * a);
+                let turn = (crest * e / (n.abs() + e).powi(2) - side.abs()).abs();
+                drainage.bend += 2.0 * a * g.length_squared() * turn;
+                crest * crest - RIDGE_BIAS
+            }
+            Relief::Gully(k) => {
+                let across = p.normalize_or_zero().cross(drainage.gradient);
+                let slope = across.length();
+                if slope < 1e-9 || weight <= 0.0 {
+                    return 0.0;
+                }
+                let wavelength = self.gullies.wavelength(k);
+                let dir = across / slope;
+                let (re, im) = self.gullies.stripes(k, p, dir);
+                let length = re.hypot(im);
+                if length < 1e-12 {
+                    return 0.0;
+                }
+                // Where the corners' waves cancel the phasor is short and its angle
+                // unsteady: fade there (continuously). Where the drainage direction turns
+                // within a wavelength (across a coarser crest or floor, or near a flat
+                // summit, saddle or floor) the stripes would shear and tear: fade there
+                // too, by the turn per wavelength (bend / slope x wavelength, radians).
+                let coherence = (length / 0.5).min(1.0);
+                let turn = drainage.bend * wavelength / slope / GULLY_MAX_TURN;
+                let fade =
+                    coherence * smoothstep(0.0, GULLY_FULL_SLOPE, slope) / (1.0 + turn * turn);
+                let angle = im.atan2(re);
+                let triangle = 1.0 - 2.0 * angle.abs() / std::f64::consts::PI;
+                // The drainage takes the slope of the matching sine wave rather than the
+                // triangle's (equal at mid-flank): the triangle's slope flips at crests and
+                // floors. Its bend is that sine's second derivative.
+                let a = amplitude_m * weight * fade;
+                let k2 = 4.0 / wavelength;
+                drainage.gradient += dir * (-k2 * (im / length) * a);
+                drainage.bend += k2 * (re / length).abs() * a * std::f64::consts::TAU / wavelength;
+                triangle * fade
             }
             Relief::Detail(k) => self.detail.octave(k, p),
             Relief::Texture(k) => self.texture.octave(k, p),
@@ -230,24 +337,25 @@ impl ProceduralPlanet {
     #[inline]
     pub fn relief_weight(r: Relief, f: &Fields) -> f64 {
         match r {
-            Relief::Ridge(_) => f.mountains,
+            Relief::Ridge(_) | Relief::Gully(_) => f.mountains,
             Relief::Detail(_) => f.roughness,
             Relief::Texture(_) => 0.0,
         }
     }
 
-    /// Largest possible magnitude of everything finer than `finest_wavelength_m`, for a
-    /// roughness and mountain weight at most `max_weight`, metres: the error bound of
-    /// leaving those octaves out.
-    pub fn omitted_amplitude_m(&self, finest_wavelength_m: f64, max_weight: f64) -> f64 {
+    /// Largest possible magnitude of everything finer than `finest_wavelength_m` where the
+    /// field weights are at most those of `max` (its mountain and roughness weights), metres:
+    /// the error bound of leaving those octaves out.
+    pub fn omitted_amplitude_m(&self, finest_wavelength_m: f64, max: &Fields) -> f64 {
         self.relief_octaves()
             .filter(|r| self.wavelength_m(*r) < finest_wavelength_m)
             .map(|r| {
                 let shape_bound = match r {
-                    Relief::Ridge(_) => 1.0 - RIDGE_BIAS,
+                    Relief::Ridge(_) => RIDGE_BIAS.max(1.0 - RIDGE_BIAS),
+                    Relief::Gully(_) => 1.0,
                     Relief::Detail(_) | Relief::Texture(_) => NOISE_BOUND,
                 };
-                self.amplitude_m(r) * shape_bound * max_weight
+                self.amplitude_m(r) * shape_bound * Self::relief_weight(r, max)
             })
             .sum()
     }
@@ -258,9 +366,11 @@ impl ProceduralPlanet {
     pub fn height_m(&self, p: DVec3, finest_wavelength_m: f64) -> f64 {
         let f = self.fields(p);
         let mut h = f.base_m;
+        let mut drainage = Drainage::default();
         for r in self.relief_octaves() {
             if self.wavelength_m(r) >= finest_wavelength_m && !matches!(r, Relief::Texture(_)) {
-                h += self.amplitude_m(r) * Self::relief_weight(r, &f) * self.relief_shape(r, p);
+                let (a, w) = (self.amplitude_m(r), Self::relief_weight(r, &f));
+                h += a * w * self.relief_term(r, p, a, w, &mut drainage);
             }
         }
         h
@@ -294,6 +404,10 @@ pub(crate) fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
 mod tests {
     use super::*;
     use globus_geo::Cartographic;
+
+    /// The engine's default seed (`globus_engine::DEFAULT_SEED`), whose highest range stands
+    /// at 7.6 E 46 N.
+    const SEED: u64 = 24;
 
     fn surface(p: &ProceduralPlanet, lon: f64, lat: f64) -> DVec3 {
         p.ellipsoid()
@@ -385,12 +499,77 @@ mod tests {
         assert!(diffs > 10, "sub-metre octaves change the surface");
     }
 
+    /// Issue 20's figure: in the highest range, at 30 m spacing, at least 15 % of the area is
+    /// steeper than 30 degrees (real alpine terrain: 20-30 %), and not a wall of cliffs.
+    #[test]
+    fn the_highest_range_is_as_steep_as_the_alps() {
+        let planet = ProceduralPlanet::new(SEED);
+        let (h, side) = planet.height_window((7.6, 46.0), 6_000.0, 30.0);
+        let steep = crate::slopes::steep_share(&h, side, 30.0, 30.0);
+        let cliffs = crate::slopes::steep_share(&h, side, 30.0, 55.0);
+        assert!((0.15..0.5).contains(&steep), "{steep}");
+        assert!(cliffs < 0.01, "{cliffs}");
+        let highest = h.iter().copied().fold(0.0, f64::max);
+        assert!(highest > 2_500.0, "{highest}");
+    }
+
+    /// Gullies run down the slope they follow: across it each octave rises and falls a full
+    /// turn per wavelength, along it hardly at all.
+    #[test]
+    fn gullies_run_down_the_slope() {
+        let planet = ProceduralPlanet::new(SEED);
+        let r = Relief::Gully(4);
+        let step = planet.wavelength_m(r) / 8.0;
+        let (mut along, mut across) = (0.0, 0.0);
+        let n = 400;
+        for i in 0..n {
+            let t = f64::from(i);
+            let p = surface(
+                &planet,
+                7.0 + (t * 0.618_034).fract(),
+                45.5 + (t * 0.754_878).fract(),
+            );
+            let up = planet.up(p);
+            // A steep drainage slope (0.5 m/m) falling towards the west.
+            let east = DVec3::Z.cross(up).normalize();
+            let slope = east * 0.5;
+            let shape = |q: DVec3| {
+                let mut d = Drainage {
+                    gradient: slope,
+                    bend: 0.0,
+                };
+                planet.relief_term(r, q, 1.0, 1.0, &mut d)
+            };
+            let north = up.cross(east);
+            let s0 = shape(p);
+            along += (shape(p + east * step) - s0).abs();
+            across += (shape(p + north * step) - s0).abs();
+        }
+        let (along, across) = (along / f64::from(n), across / f64::from(n));
+        // A triangle wave moves 2 x 2 / 8 = 0.5 per eighth of a wavelength across.
+        assert!(across > 0.3, "{across}");
+        assert!(along < 0.3 * across, "along {along}, across {across}");
+    }
+
     #[test]
     fn omitted_amplitude_shrinks_with_wavelength() {
         let planet = ProceduralPlanet::new(1);
-        let a = planet.omitted_amplitude_m(10.0, 1.0);
-        let b = planet.omitted_amplitude_m(1.0, 1.0);
+        let max = Fields {
+            mountains: 1.0,
+            roughness: 1.0,
+            ..Fields::default()
+        };
+        let a = planet.omitted_amplitude_m(10.0, &max);
+        let b = planet.omitted_amplitude_m(1.0, &max);
         assert!(a > b && b > 0.0);
-        assert_eq!(planet.omitted_amplitude_m(0.01, 1.0), 0.0);
+        assert_eq!(planet.omitted_amplitude_m(0.01, &max), 0.0);
+        // Gullies are left out of mountains only.
+        let plains = Fields {
+            roughness: 1.0,
+            ..Fields::default()
+        };
+        assert!(
+            planet.omitted_amplitude_m(100.0, &plains) < planet.omitted_amplitude_m(100.0, &max)
+        );
     }
 }

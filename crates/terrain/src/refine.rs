@@ -133,13 +133,29 @@ impl<'a> Base<'a> {
             catmull_rom(x - f64::from(cx)),
             catmull_rom(y - f64::from(cy)),
         );
+        // One sample beyond the ring (a cell past it) is extrapolated linearly from the ring
+        // and the sample inside it, so a refined tile's own ring, half a base cell outside the
+        // base, follows the slope instead of flattening.
+        let sample = |i: i32, j: i32| {
+            let h = |i: i32, j: i32| f64::from(self.tile.height_at(i, j));
+            let inside = |k: i32| if k > hi { hi - 1 } else { lo + 1 };
+            match (i.clamp(lo, hi) == i, j.clamp(lo, hi) == j) {
+                (true, true) => h(i, j),
+                (false, true) => 2.0 * h(i.clamp(lo, hi), j) - h(inside(i), j),
+                (true, false) => 2.0 * h(i, j.clamp(lo, hi)) - h(i, inside(j)),
+                (false, false) => {
+                    let (ic, jc) = (i.clamp(lo, hi), j.clamp(lo, hi));
+                    2.0 * h(ic, jc) - h(inside(i), inside(j))
+                }
+            }
+        };
         let mut sum = 0.0;
         for (b, wyb) in wy.iter().enumerate() {
-            let j = (cy - 1 + b as i32).clamp(lo, hi);
+            let j = (cy - 1 + b as i32).clamp(lo - 1, hi + 1);
             let mut row = 0.0;
             for (a, wxa) in wx.iter().enumerate() {
-                let i = (cx - 1 + a as i32).clamp(lo, hi);
-                row += wxa * f64::from(self.tile.height_at(i, j));
+                let i = (cx - 1 + a as i32).clamp(lo - 1, hi + 1);
+                row += wxa * sample(i, j);
             }
             sum += wyb * row;
         }
