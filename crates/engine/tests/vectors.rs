@@ -316,14 +316,10 @@ fn the_countries_from_orbit_cover_what_a_cpu_point_in_polygon_covers() {
             checked > 20_000 && land > 1_000,
             "{name}: {checked} checked, {land} inside"
         );
-        // Known defect, not yet fixed: round the south pole the drape leaves a hole of about
-        // 80 pixels (within 3 degrees of the pole, in the level-1 tile 1/0/1, with or without
-        // morphing, and not a depth-test matter: a 10x looser fill tolerance keeps it). It
-        // was 97 of 48,960 pixels (0.198 %) before the gullied mountains, 99 after; the other
-        // views differ by 0.02-0.05 %.
-        let allowed = if name == "south_pole" { 0.0025 } else { 0.002 };
+        // Measured: 0.022, 0.050, 0.035 and 0.047 %. The south pole was 0.198 % while line
+        // simplification dropped Antarctica's corners at the pole (a spiral hole there).
         assert!(
-            share < allowed,
+            share < 0.001,
             "{name}: {wrong} of {checked} pixels differ from the CPU reference"
         );
     }

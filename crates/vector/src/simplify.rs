@@ -15,10 +15,12 @@
 //! The `geo` crate's `Simplify` gives one tolerance per call over the whole line; the
 //! ranking and the block index are what a tile needs, hence this module.
 //!
-//! Distances are measured where the dropped vertex is, in degrees of latitude with
-//! longitude scaled by the cosine of its latitude (a straight piece of the tile's
-//! longitude/latitude plane stays straight under that scaling, so the distance is exact for
-//! what the tile draws, to the scale's change across the piece).
+//! Distances are measured in degrees of latitude with longitude scaled by the largest cosine
+//! of latitude over the dropped vertex and the chord that replaces it (a straight piece of
+//! the tile's longitude/latitude plane stays straight under that scaling). The scale at the
+//! vertex alone is not enough near a pole: there it vanishes, and a ring's corner at the pole
+//! (Antarctica's runs along 90 S from 180 E to 180 W) measured nothing from a chord that
+//! swept hundreds of kilometres across the ice, which left a spiral hole in the fill.
 //!
 //! Cost: ranking splits an interval at its farthest vertex, or at its middle where the
 //! farthest is in the interval's outer eighths (the kept sets stay exact, only a little less
@@ -79,7 +81,12 @@ impl LineIndex {
             }
             let (mut far, mut dmax2) = (a + 1, -1.0f64);
             for i in a + 1..b {
-                let d2 = distance2(pts[i], cos[i], pts[a], pts[b]);
+                let d2 = distance2(
+                    pts[i],
+                    pts[a],
+                    pts[b],
+                    scale(&pts[i], &pts[a], &pts[b], [cos[i], cos[a], cos[b]]),
+                );
                 if d2 > dmax2 {
                     (far, dmax2) = (i, d2);
                 }
@@ -276,13 +283,26 @@ fn round_down(x: f64) -> f32 {
 }
 
 /// Distance of `p` from the segment `a`-`b` in degrees of latitude, longitudes scaled by the
-/// cosine of `p`'s latitude.
+/// largest cosine of latitude over `p` and the segment.
 pub fn distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    distance2(p, p[1].to_radians().cos(), a, b).sqrt()
+    let cos = [p, a, b].map(|q| q[1].to_radians().cos());
+    distance2(p, a, b, scale(&p, &a, &b, cos)).sqrt()
 }
 
-/// The square of [`distance`], given the cosine of `p`'s latitude.
-fn distance2(p: [f64; 2], c: f64, a: [f64; 2], b: [f64; 2]) -> f64 {
+/// The largest cosine of latitude over `p` and the segment `a`-`b` (given their cosines): 1
+/// where they lie on both sides of the equator.
+fn scale(p: &[f64; 2], a: &[f64; 2], b: &[f64; 2], cos: [f64; 3]) -> f64 {
+    let lo = p[1].min(a[1]).min(b[1]);
+    let hi = p[1].max(a[1]).max(b[1]);
+    if lo <= 0.0 && hi >= 0.0 {
+        1.0
+    } else {
+        cos[0].max(cos[1]).max(cos[2])
+    }
+}
+
+/// The square of [`distance`], given the longitude scale `c`.
+fn distance2(p: [f64; 2], a: [f64; 2], b: [f64; 2], c: f64) -> f64 {
     let a = [(a[0] - p[0]) * c, a[1] - p[1]];
     let b = [(b[0] - p[0]) * c, b[1] - p[1]];
     let d = [b[0] - a[0], b[1] - a[1]];
@@ -351,6 +371,32 @@ mod tests {
         kept.windows(2)
             .flat_map(|w| (w[0] + 1..w[1]).map(move |i| distance(pts[i], pts[w[0]], pts[w[1]])))
             .fold(0.0, f64::max)
+    }
+
+    /// A ring's corner at the pole is kept: the chord that would replace it sweeps across the
+    /// polar cap, far from it everywhere but at the pole itself (Antarctica's ring runs along
+    /// 90 S from 180 E to 180 W; dropping its corners left a spiral hole in the fill).
+    #[test]
+    fn a_corner_at_the_pole_is_kept() {
+        let pts = [
+            [150.0, -70.0],
+            [170.0, -78.0],
+            [180.0, -84.7],
+            [180.0, -90.0],
+            [-180.0, -90.0],
+            [-180.0, -84.7],
+            [-170.0, -78.0],
+            [-150.0, -70.0],
+        ];
+        let index = LineIndex::new(&pts);
+        for k in [3, 4] {
+            assert!(index.rank(k) > 1.0, "corner {k}: rank {}", index.rank(k));
+        }
+        // The chord from the last coast vertex to the far pole corner passes 5 degrees of
+        // latitude (at the coast's scale) from the near corner.
+        assert!(distance(pts[3], pts[2], pts[4]) > 4.0);
+        // Near the equator the scale is the plain one.
+        assert!((distance([0.0, 1.0], [-1.0, 0.0], [1.0, 0.0]) - 1.0).abs() < 1e-12);
     }
 
     #[test]
