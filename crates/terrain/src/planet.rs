@@ -295,39 +295,7 @@ impl ProceduralPlanet {
                 drainage.bend += 2.0 * a * g.length_squared() * turn;
                 crest * crest - RIDGE_BIAS
             }
-            Relief::Gully(k) => {
-                let across = p.normalize_or_zero().cross(drainage.gradient);
-                let slope = across.length();
-                if slope < 1e-9 || weight <= 0.0 {
-                    return 0.0;
-                }
-                let wavelength = self.gullies.wavelength(k);
-                let dir = across / slope;
-                let (re, im) = self.gullies.stripes(k, p, dir);
-                let length = re.hypot(im);
-                if length < 1e-12 {
-                    return 0.0;
-                }
-                // Where the corners' waves cancel the phasor is short and its angle
-                // unsteady: fade there (continuously). Where the drainage direction turns
-                // within a wavelength (across a coarser crest or floor, or near a flat
-                // summit, saddle or floor) the stripes would shear and tear: fade there
-                // too, by the turn per wavelength (bend / slope x wavelength, radians).
-                let coherence = (length / 0.5).min(1.0);
-                let turn = drainage.bend * wavelength / slope / GULLY_MAX_TURN;
-                let fade =
-                    coherence * smoothstep(0.0, GULLY_FULL_SLOPE, slope) / (1.0 + turn * turn);
-                let angle = im.atan2(re);
-                let triangle = 1.0 - 2.0 * angle.abs() / std::f64::consts::PI;
-                // The drainage takes the slope of the matching sine wave rather than the
-                // triangle's (equal at mid-flank): the triangle's slope flips at crests and
-                // floors. Its bend is that sine's second derivative.
-                let a = amplitude_m * weight * fade;
-                let k2 = 4.0 / wavelength;
-                drainage.gradient += dir * (-k2 * (im / length) * a);
-                drainage.bend += k2 * (re / length).abs() * a * std::f64::consts::TAU / wavelength;
-                triangle * fade
-            }
+            Relief::Gully(k) => gully(&self.gullies, k, p, amplitude_m * weight, drainage),
             Relief::Detail(k) => self.detail.octave(k, p),
             Relief::Texture(k) => self.texture.octave(k, p),
         }
@@ -387,6 +355,43 @@ impl ProceduralPlanet {
     pub fn up(&self, p: DVec3) -> DVec3 {
         self.ellipsoid.geodetic_normal(p).unwrap_or(DVec3::Z)
     }
+}
+
+/// Gully octave `k` of `octaves` at `p` (its shape, in [-1, 1]) following `drainage`, with
+/// `amplitude_m` (its amplitude times its weight) to add its own slope to the drainage: see
+/// [`ProceduralPlanet::relief_term`].
+#[inline]
+fn gully(octaves: &Octaves, k: usize, p: DVec3, amplitude_m: f64, drainage: &mut Drainage) -> f64 {
+    let across = p.normalize_or_zero().cross(drainage.gradient);
+    let slope = across.length();
+    if slope < 1e-9 || amplitude_m <= 0.0 {
+        return 0.0;
+    }
+    let wavelength = octaves.wavelength(k);
+    let dir = across / slope;
+    let (re, im) = octaves.stripes(k, p, dir);
+    let length = re.hypot(im);
+    if length < 1e-12 {
+        return 0.0;
+    }
+    // Where the corners' waves cancel the phasor is short and its angle unsteady: fade there
+    // (continuously). Where the drainage direction turns within a wavelength (across a
+    // coarser crest or floor, or near a flat summit, saddle or floor) the stripes would shear
+    // and tear: fade there too, by the turn per wavelength (bend / slope x wavelength,
+    // radians).
+    let coherence = (length / 0.5).min(1.0);
+    let turn = drainage.bend * wavelength / slope / GULLY_MAX_TURN;
+    let fade = coherence * smoothstep(0.0, GULLY_FULL_SLOPE, slope) / (1.0 + turn * turn);
+    let angle = im.atan2(re);
+    let triangle = 1.0 - 2.0 * angle.abs() / std::f64::consts::PI;
+    // The drainage takes the slope of the matching sine wave rather than the triangle's (equal
+    // at mid-flank): the triangle's slope flips at crests and floors. Its bend is that sine's
+    // second derivative.
+    let a = amplitude_m * fade;
+    let k2 = 4.0 / wavelength;
+    drainage.gradient += dir * (-k2 * (im / length) * a);
+    drainage.bend += k2 * (re / length).abs() * a * std::f64::consts::TAU / wavelength;
+    triangle * fade
 }
 
 /// Height of the continental interior plateaus, metres.
