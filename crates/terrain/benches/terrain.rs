@@ -58,6 +58,16 @@ fn tiles(c: &mut Criterion) {
             b.iter(|| black_box(planet.generate_tile(black_box(key))))
         });
     }
+    // In the default planet's highest range (7.6 E 46 N), where ridges and gullies run.
+    let alps = ProceduralPlanet::new(24);
+    for key in [
+        TileKey::new(10, 1_067, 250),
+        TileKey::new(14, 17_075, 4_004),
+    ] {
+        c.bench_function(&format!("generate_tile alps level {}", key.level()), |b| {
+            b.iter(|| black_box(alps.generate_tile(black_box(key))))
+        });
+    }
     let tile = planet.generate_tile(TileKey::new(12, 2_134, 1_000));
     for (name, options) in [
         ("build_mesh adaptive", MeshOptions::default()),
