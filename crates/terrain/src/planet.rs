@@ -281,6 +281,11 @@ impl ProceduralPlanet {
         drainage: &mut Drainage,
     ) -> f64 {
         match r {
+            Relief::Ridge(k) if weight <= 0.0 => {
+                // Outside the mountains nothing follows the ridges: no gradient needed.
+                let crest = 1.0 - self.ridges.octave(k, p).abs();
+                crest * crest - RIDGE_BIAS
+            }
             Relief::Ridge(k) => {
                 let (n, g) = self.ridges.octave_d(k, p);
                 let crest = 1.0 - n.abs();

@@ -138,15 +138,21 @@ impl<'a> Base<'a> {
         // base, follows the slope instead of flattening.
         let sample = |i: i32, j: i32| {
             let h = |i: i32, j: i32| f64::from(self.tile.height_at(i, j));
-            let inside = |k: i32| if k > hi { hi - 1 } else { lo + 1 };
-            match (i.clamp(lo, hi) == i, j.clamp(lo, hi) == j) {
-                (true, true) => h(i, j),
-                (false, true) => 2.0 * h(i.clamp(lo, hi), j) - h(inside(i), j),
-                (true, false) => 2.0 * h(i, j.clamp(lo, hi)) - h(i, inside(j)),
-                (false, false) => {
-                    let (ic, jc) = (i.clamp(lo, hi), j.clamp(lo, hi));
-                    2.0 * h(ic, jc) - h(inside(i), inside(j))
+            // Per axis: the nearest ring sample, and the one inside it where outside.
+            let near = |k: i32| k.clamp(lo, hi);
+            let inward = |k: i32| {
+                if k > hi {
+                    hi - 1
+                } else if k < lo {
+                    lo + 1
+                } else {
+                    k
                 }
+            };
+            if (near(i), near(j)) == (i, j) {
+                h(i, j)
+            } else {
+                2.0 * h(near(i), near(j)) - h(inward(i), inward(j))
             }
         };
         let mut sum = 0.0;
