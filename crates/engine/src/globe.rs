@@ -30,6 +30,7 @@ use globus_tiling::quality::QualityLoop;
 use globus_tiling::{DrawTile, Selection, SelectionOptions, SelectionStats, select_into};
 
 use crate::builder::Settings;
+use crate::frame::detail::{BudgetUse, next_bound};
 use crate::frame::plan::{FramePlan, Motion};
 use crate::frame::select::ResidentOracle;
 use crate::frame::upload::make_resident;
@@ -144,12 +145,9 @@ pub struct Globe {
     last_eye: Option<DVec3>,
     memory: Option<MemoryPlan>,
     /// On a software rasteriser under a memory budget, the most triangles a frame may draw
-    /// ([`SOFTWARE_BYTES_PER_TRIANGLE`] each), and whether the last frame drew more.
+    /// ([`SOFTWARE_BYTES_PER_TRIANGLE`] each), and how many the last frame drew.
     max_triangles: Option<u64>,
-    over_triangles: bool,
-    /// Whether the last frame drew under 3/4 of them (the bound may relax only then, so it
-    /// does not swing about the limit).
-    triangle_room: bool,
+    last_triangles: u64,
     /// The camera of the last update.
     camera: Option<FrameCamera>,
     /// The camera of the last render (what the targets hold).
@@ -254,8 +252,7 @@ impl Globe {
                 .memory_bytes
                 .filter(|_| software)
                 .map(|total| total / SOFTWARE_TRIANGLE_SHARE / SOFTWARE_BYTES_PER_TRIANGLE),
-            over_triangles: false,
-            triangle_room: true,
+            last_triangles: 0,
             relax_detail: true,
             quality: settings.quality.map(QualityLoop::new),
             request_lookahead_frames: settings.request_lookahead_frames,
@@ -561,7 +558,7 @@ impl Globe {
             &self.plan,
             &self.selection.draw,
         );
-        self.adapt_detail(residency.pool_full || layer_stats.over_budget || self.over_triangles);
+        self.adapt_detail(residency.pool_full, &layer_stats);
 
         // Draw list.
         let lighting = self
@@ -578,10 +575,7 @@ impl Globe {
                 tiles: &self.selection.draw,
             },
         );
-        self.over_triangles = self.max_triangles.is_some_and(|m| draw.triangles > m);
-        self.triangle_room = self
-            .max_triangles
-            .is_none_or(|m| draw.triangles * 4 < m * 3);
+        self.last_triangles = draw.triangles;
         FrameReport {
             selection: self.selection.stats,
             select_us,
@@ -596,28 +590,30 @@ impl Globe {
         }
     }
 
-    /// When the GPU pool or the CPU cache cannot hold what the view needs, raise the error
-    /// bound (less detail) instead of thrashing or growing; relax it again when there is
-    /// room (unless relaxing is off, as for offline frames, which must settle). The bound
-    /// relaxes down to the quality loop's, which follows the frame times.
-    fn adapt_detail(&mut self, budget_bound: bool) {
-        let capacity = f64::from(self.renderer.pool().capacity());
-        // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
-        let needed = self.selection.draw.len() as f64 * 4.0 / 3.0;
+    /// When the GPU pool, the CPU cache or the software rasteriser's triangle share cannot
+    /// hold what the view needs, raise the error bound (less detail) instead of thrashing
+    /// or growing; lower it again when all have room (unless relaxing is off, as for
+    /// offline frames, which must settle), down to the quality loop's bound, which follows
+    /// the frame times. Live frames move it a few percent a frame, so morphing carries the
+    /// merges and splits ([`crate::frame::detail`]).
+    fn adapt_detail(&mut self, pool_full: bool, layer: &LayerStats) {
         let floor = match (&self.quality, self.relax_detail) {
             (Some(q), true) => q.sse_px(),
             _ => self.settings.max_sse_px,
         };
+        let budgets = BudgetUse {
+            // Drawn tiles plus the ancestors selection walks through: about 4/3 of the drawn.
+            slots_needed: self.selection.draw.len() as f64 * 4.0 / 3.0,
+            slots: f64::from(self.renderer.pool().capacity()),
+            pool_full,
+            cache_in_use: layer.in_use_bytes as f64,
+            cache_budget: layer.budget_bytes as f64,
+            cache_over: layer.over_budget,
+            triangles: self.last_triangles as f64,
+            triangle_cap: self.max_triangles.map(|m| m as f64),
+        };
         let sse = &mut self.selection_options.max_sse_px;
-        if needed > capacity * 0.9 || budget_bound {
-            *sse *= 1.25;
-        } else if *sse < floor {
-            // The frame-time loop asks for less detail.
-            *sse = floor;
-        } else if self.relax_detail && needed < capacity * 0.6 && self.triangle_room && *sse > floor
-        {
-            *sse = (*sse / 1.1).max(floor);
-        }
+        *sse = next_bound(*sse, floor, &budgets, self.relax_detail);
     }
 
     /// Reports how long the last frame took, seconds (from one frame's start to the next's,

@@ -19,6 +19,10 @@ pub struct LruCache<V> {
     map: FxHashMap<TileKey, Entry<V>>,
     bytes: usize,
     budget: usize,
+    /// The latest frame stamp any entry was used at, and the bytes of the entries used then
+    /// (what the view needs now: the budget must hold at least that).
+    latest: u64,
+    latest_bytes: usize,
 }
 
 impl<V> LruCache<V> {
@@ -28,6 +32,27 @@ impl<V> LruCache<V> {
             map: FxHashMap::default(),
             bytes: 0,
             budget: budget_bytes,
+            latest: 0,
+            latest_bytes: 0,
+        }
+    }
+
+    /// Counts `bytes` as used at frame `now` (after any use at an earlier stamp was taken
+    /// back with [`LruCache::unnote`]).
+    fn note(&mut self, now: u64, bytes: usize) {
+        if now > self.latest {
+            self.latest = now;
+            self.latest_bytes = 0;
+        }
+        if now == self.latest {
+            self.latest_bytes += bytes;
+        }
+    }
+
+    /// Takes back an entry's bytes from the latest frame's use, if it was used then.
+    fn unnote(&mut self, last_used: u64, bytes: usize) {
+        if last_used == self.latest {
+            self.latest_bytes -= bytes;
         }
     }
 
@@ -42,8 +67,10 @@ impl<V> LruCache<V> {
             },
         ) {
             self.bytes -= old.bytes;
+            self.unnote(old.last_used, old.bytes);
         }
         self.bytes += bytes;
+        self.note(now, bytes);
     }
 
     /// The value for `key`.
@@ -60,7 +87,10 @@ impl<V> LruCache<V> {
     pub fn resize(&mut self, key: TileKey, bytes: usize) {
         if let Some(e) = self.map.get_mut(&key) {
             self.bytes = self.bytes - e.bytes + bytes;
+            let (old, last_used) = (e.bytes, e.last_used);
             e.bytes = bytes;
+            self.unnote(last_used, old);
+            self.note(last_used, bytes);
         }
     }
 
@@ -74,7 +104,10 @@ impl<V> LruCache<V> {
     pub fn touch(&mut self, key: TileKey, now: u64) -> bool {
         match self.map.get_mut(&key) {
             Some(e) if e.last_used != now => {
+                let (before, bytes) = (e.last_used, e.bytes);
                 e.last_used = now;
+                self.unnote(before, bytes);
+                self.note(now, bytes);
                 true
             }
             _ => false,
@@ -101,6 +134,7 @@ impl<V> LruCache<V> {
             }
             if let Some(e) = self.map.remove(&key) {
                 self.bytes -= e.bytes;
+                self.unnote(e.last_used, e.bytes);
                 evicted.push(key);
             }
         }
@@ -110,6 +144,16 @@ impl<V> LruCache<V> {
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         self.bytes
+    }
+
+    /// Bytes of the entries used (touched or inserted) at frame `now`: 0 unless `now` is the
+    /// latest stamp given.
+    pub fn bytes_used_at(&self, now: u64) -> usize {
+        if now == self.latest {
+            self.latest_bytes
+        } else {
+            0
+        }
     }
 
     /// The budget, bytes.
@@ -182,5 +226,43 @@ mod tests {
         c.insert(k(3), vec![3u8], 10, 3);
         assert_eq!(c.evict_to_budget(|_, _| false), vec![k(1)]);
         assert_eq!(c.bytes(), 20);
+    }
+
+    #[test]
+    fn the_bytes_used_in_the_latest_frame_are_counted_as_entries_come_go_and_change() {
+        let mut c = LruCache::new(100);
+        // A fixed pseudo-random sequence of inserts, touches, resizes and evictions over
+        // advancing frames, checked against a scan after every step.
+        let mut state = 12345u64;
+        let mut next = |n: u64| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) % n
+        };
+        let mut now = 1;
+        for step in 0..5000 {
+            let key = k(next(40) as u32);
+            match next(6) {
+                0 => c.insert(key, (), 1 + next(20) as usize, now),
+                1 | 2 => {
+                    c.touch(key, now);
+                }
+                3 => c.resize(key, 1 + next(20) as usize),
+                4 => {
+                    let protect = next(3);
+                    c.evict_to_budget(|k, last| last == now || k.x() % 3 == protect as u32);
+                }
+                _ => now += 1,
+            }
+            let scan: usize = c
+                .map
+                .values()
+                .filter(|e| e.last_used == now)
+                .map(|e| e.bytes)
+                .sum();
+            assert_eq!(c.bytes_used_at(now), scan, "step {step}");
+        }
+        assert_eq!(c.bytes_used_at(now + 1), 0);
     }
 }

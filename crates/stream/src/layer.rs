@@ -68,6 +68,11 @@ pub struct LayerStats {
     pub cached: u32,
     /// Bytes in the cache.
     pub cached_bytes: usize,
+    /// Bytes of the cached tiles this frame uses (drawn, their ancestors, and arrivals):
+    /// what the view needs at least, against the budget.
+    pub in_use_bytes: usize,
+    /// The cache's budget, bytes.
+    pub budget_bytes: usize,
     /// Whether the cache is over its budget with everything in use: nothing more is loaded
     /// until the engine lowers the detail.
     pub over_budget: bool,
@@ -316,6 +321,8 @@ impl TerrainLayer {
         stats.colours_loading = self.colours_loading() as u32;
         stats.cached = self.cache.len() as u32;
         stats.cached_bytes = self.cache.bytes();
+        stats.in_use_bytes = self.cache.bytes_used_at(now);
+        stats.budget_bytes = self.cache.budget();
         stats.over_budget = self.cache.is_over_budget();
         stats
     }

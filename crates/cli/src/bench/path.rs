@@ -150,6 +150,22 @@ pub fn run(
                 .collect(),
         )
     };
+    // How the error bound moved from frame to frame (budgets and the quality loop): the
+    // factor of each step, and how often it turned from rising to falling or back.
+    let bounds: Vec<f64> = samples.iter().map(|s| s.sse_bound_px).collect();
+    let steps: Vec<f64> = bounds
+        .windows(2)
+        .map(|w| (w[1] / w[0]).max(w[0] / w[1]))
+        .collect();
+    let mut reversals = 0u32;
+    let mut last_rise: Option<bool> = None;
+    for w in bounds.windows(2).filter(|w| w[1] != w[0]) {
+        let rise = w[1] > w[0];
+        if last_rise.is_some_and(|r| r != rise) {
+            reversals += 1;
+        }
+        last_rise = Some(rise);
+    }
     let globe = off.globe();
     let st = globe.layer().scheduler_stats();
     let cs = globe.layer().colour_scheduler_stats();
@@ -161,6 +177,8 @@ pub fn run(
         "sse_px": builder.error_bound_px(),
         "target_fps": builder.target_frame_rate(),
         "sse_bound_px": column(|s| s.sse_bound_px),
+        "sse_bound_step": quantiles(steps),
+        "sse_bound_reversals": reversals,
         "realtime": a.realtime,
         "wall_s": clock.elapsed().as_secs_f64(),
         "mesh_error": a.globe.mesh_error,
