@@ -148,8 +148,10 @@ pub struct GlobeArgs {
 
 #[derive(Args)]
 pub struct ViewArgs {
-    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default 10,30,15000000,0,-90:
-    /// the whole planet; for a replay, looking down on its aircraft).
+    /// Start camera: LON,LAT,ALT_M,HEADING_DEG,PITCH_DEG (default: the whole planet from
+    /// 15,000 km over 30 N, on the afternoon side of the Sun of --time with the evening
+    /// terminator in view, or over 10 E with `--time fixed`; for a replay, looking down on
+    /// its aircraft).
     #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// ALT_M is above the ground under the camera, not above the ellipsoid.
@@ -163,8 +165,9 @@ pub struct ViewArgs {
     /// Close the window after this many seconds (for automated checks).
     #[arg(long)]
     pub exit_after: Option<f64>,
-    /// Light the planet by the Sun of this moment: RFC 3339 (2026-06-21T12:00:00Z), Unix
-    /// seconds or `now` (default: a fixed light from the south-west of the view).
+    /// Light the planet by the Sun of this moment, RFC 3339 (2026-06-21T12:00:00Z), Unix
+    /// seconds or `now`; the Sun's clock then runs at real speed ([ and ] move it by an
+    /// hour); default now. `fixed`: a fixed light from the south-west of the view instead.
     #[arg(long)]
     pub time: Option<String>,
 }
@@ -360,8 +363,27 @@ pub enum GeoCommand {
     },
 }
 
-/// The planet-wide view `globus view` starts from.
+/// The planet-wide view `globus view` starts from under a fixed light.
 pub const DEFAULT_VIEW_CAMERA: &str = "10,30,15000000,0,-90";
+
+/// How far east of the subsolar point (degrees) the default view looks down under the Sun of
+/// a moment: the afternoon side, with the evening terminator and the first city lights
+/// inside the planet's disc (its edge is about 72 degrees from the centre at 15,000 km).
+const DEFAULT_VIEW_EAST_OF_SUN_DEG: f64 = 35.0;
+
+/// The planet-wide view `globus view` starts from: over 30 N on the afternoon side of the Sun
+/// of `sun_time` (Unix seconds), or [`DEFAULT_VIEW_CAMERA`] under a fixed light.
+pub fn default_view_camera(sun_time: Option<f64>) -> String {
+    match sun_time {
+        Some(t) => {
+            let (lon, _) = globus_geo::SunPosition::at(t).subsolar_lon_lat();
+            let lon =
+                (lon.to_degrees() + DEFAULT_VIEW_EAST_OF_SUN_DEG + 540.0).rem_euclid(360.0) - 180.0;
+            format!("{lon:.3},30,15000000,0,-90")
+        }
+        None => DEFAULT_VIEW_CAMERA.to_owned(),
+    }
+}
 
 impl ViewArgs {
     /// `--exit-after` as a duration (checked).
@@ -657,4 +679,35 @@ pub fn parse_camera(s: &str, above_ground: bool) -> anyhow::Result<CameraSpec> {
 pub fn check_writable(path: &Path) -> anyhow::Result<()> {
     globus_tiling::files::check_writable(path)
         .with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default view looks down on daylight with the Sun west of it (afternoon), at any
+    /// moment of the year and day, the longitude wrapped into -180..180.
+    #[test]
+    fn default_view_is_on_the_afternoon_side() {
+        let ellipsoid = globus_geo::Ellipsoid::WGS84;
+        assert_eq!(default_view_camera(None), DEFAULT_VIEW_CAMERA);
+        // 2026-12-05 09:13, 2026-06-21 00:00, 2027-03-20 15:30, 2026-09-23 21:00 UTC.
+        for t in [
+            1_796_461_980.0,
+            1_782_000_000.0,
+            1_805_556_600.0,
+            1_790_197_200.0,
+        ] {
+            let text = default_view_camera(Some(t));
+            let spec = parse_camera(&text, false).expect("the default camera parses");
+            assert!((-180.0..180.0).contains(&spec.lon_deg), "{text}");
+            let up = ellipsoid
+                .geodetic_normal_from_lon_lat(spec.lon_deg.to_radians(), spec.lat_deg.to_radians());
+            let east = globus_geo::DVec3::Z.cross(up).normalize();
+            let sun = globus_geo::SunPosition::at(t).direction();
+            let elevation = up.dot(sun).asin().to_degrees();
+            assert!(elevation > 10.0, "{text}: the Sun is {elevation} deg high");
+            assert!(east.dot(sun) < -0.2, "{text}: the Sun is not in the west");
+        }
+    }
 }

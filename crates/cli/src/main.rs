@@ -204,18 +204,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 fn view(a: ViewArgs) -> anyhow::Result<()> {
     let (width, height) = args::parse_size(&a.size)?;
+    let sun_time = match a.time.as_deref().unwrap_or("now").trim() {
+        "fixed" => None,
+        t => Some(traffic_cmd::parse_time(t, "--time")?),
+    };
+    let default_camera = args::default_view_camera(sun_time);
     let camera = args::parse_camera(
-        a.camera.as_deref().unwrap_or(args::DEFAULT_VIEW_CAMERA),
+        a.camera.as_deref().unwrap_or(&default_camera),
         a.above_ground,
     )?;
     let exit_after = a.exit_after()?;
     let mut globe = args::globe_builder(&a.globe)?;
     let vectors = args::vector_layer(&a.globe, &mut globe)?;
-    let sun_time = a
-        .time
-        .as_deref()
-        .map(|t| traffic_cmd::parse_time(t, "--time"))
-        .transpose()?;
     viewer::run(viewer::ViewerOptions {
         globe,
         camera,

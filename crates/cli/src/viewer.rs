@@ -10,6 +10,8 @@
 //!   screen: the wheel changes the projection's size, a drag pans, right drag turns it).
 //! * W/A/S/D fly forward/left/back/right, Q/E down/up, at a speed proportional to the height
 //!   above ground; Esc quits.
+//! * The Sun stands where it stands at `--time` (default now) and its clock runs at real
+//!   speed; [ and ] move it an hour back and forward (the title shows its moment).
 //!
 //! With traffic (`globus traffic --record FILE`): Space pauses the replay, + and - double and
 //! halve its speed, a click on an aircraft selects it (printed as one JSON line), C makes the
@@ -17,7 +19,7 @@
 //!
 //! The title shows frames per second (with `--target-fps`, the target and the error bound
 //! that holds it), tiles drawn and tiles loading (and the replay's moment, speed and
-//! aircraft).
+//! aircraft, or the Sun's moment).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -56,10 +58,13 @@ pub struct ViewerOptions {
     pub vectors: Option<VectorLayer>,
     /// A traffic record replayed over the globe (the Sun follows its clock).
     pub traffic: Option<ViewerTraffic>,
-    /// The Sun of this moment, Unix seconds (without traffic; `None`: a fixed light from the
-    /// south-west of the view).
+    /// The Sun of this moment, Unix seconds, from where its clock runs at real speed
+    /// (without traffic; `None`: a fixed light from the south-west of the view).
     pub sun_time: Option<f64>,
 }
+
+/// Seconds [ and ] move the Sun's clock.
+const SUN_STEP_S: f64 = 3600.0;
 
 /// A replay shown in the viewer: its clock runs at `speed` seconds of record per second.
 pub struct ViewerTraffic {
@@ -183,6 +188,8 @@ struct State {
     fps: FpsCounter,
     vectors: Option<VectorLayer>,
     traffic: Option<ViewerTraffic>,
+    /// The Sun's clock without traffic, Unix seconds (`None`: a fixed light).
+    sun_time: Option<f64>,
     /// Where the left button went down (a release close to it is a click).
     pressed_at: Option<PhysicalPosition<f64>>,
 }
@@ -355,6 +362,7 @@ impl State {
             },
             vectors: None,
             traffic: None,
+            sun_time: options.sun_time,
             pressed_at: None,
         })
     }
@@ -433,6 +441,16 @@ impl State {
                 }
             }
             KeyCode::KeyC if self.traffic.is_some() => self.toggle_follow(),
+            KeyCode::BracketLeft | KeyCode::BracketRight if self.traffic.is_none() => {
+                let step = if code == KeyCode::BracketLeft {
+                    -SUN_STEP_S
+                } else {
+                    SUN_STEP_S
+                };
+                if let Some(t) = self.sun_time.as_mut() {
+                    *t += step;
+                }
+            }
             KeyCode::KeyO => {
                 let on = !self.controller.is_orthographic();
                 self.controller.set_orthographic(&self.globe, on);
@@ -603,6 +621,13 @@ impl State {
         let right = axis(KeyCode::KeyD, KeyCode::KeyA);
         let up = axis(KeyCode::KeyE, KeyCode::KeyQ);
         self.controller.fly(&self.globe, forward, right, up, dt);
+        if self.traffic.is_none()
+            && let Some(t) = self.sun_time.as_mut()
+        {
+            *t += dt.as_secs_f64();
+            self.globe
+                .set_lighting(Some(globus_engine::Lighting::at_time(*t)));
+        }
         if let Some(t) = self.traffic.as_mut() {
             t.tick(dt);
             self.globe
@@ -664,15 +689,17 @@ impl State {
             self.fps.fps = f64::from(self.fps.frames) / elapsed;
             self.fps.frames = 0;
             self.fps.since = Instant::now();
-            let traffic = self.traffic.as_ref().map_or(String::new(), |t| {
-                format!(
+            let traffic = match (&self.traffic, self.sun_time) {
+                (Some(t), _) => format!(
                     " | {} x{}{} | {} aircraft",
                     crate::traffic_cmd::format_time(t.scene.time_s),
                     t.speed,
                     if t.paused { " paused" } else { "" },
                     t.scene.layer.stats().aircraft
-                )
-            });
+                ),
+                (None, Some(t)) => format!(" | sun {}", crate::traffic_cmd::format_time(t)),
+                (None, None) => String::new(),
+            };
             // Orthographic: the projection's size; perspective: the height above ground.
             let scale = match self.controller.view().ortho_height_m() {
                 Some(m) => format!("top-down {:.1} km", m / 1e3),
