@@ -37,7 +37,7 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch, errors: &mut
     errors.resize(side * side, 0.0);
     level_two(h, side, errors);
     scratch.transposed = false;
-    scratch.phased.data.clear();
+    scratch.phased_filled = false;
     let mut s = 4;
     while s <= n {
         if s == n || s > ACROSS_SQUARES_UP_TO {
@@ -54,8 +54,9 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch, errors: &mut
 /// would cost page faults every level).
 #[derive(Default)]
 pub(super) struct Scratch {
-    /// The grid regrouped for [`across_squares`], once filled.
+    /// The grid regrouped for [`across_squares`], once `phased_filled`.
     phased: Phased,
+    phased_filled: bool,
     /// The grid transposed, for [`along_rows`], once `transposed`.
     columns: Vec<f32>,
     transposed: bool,
@@ -111,12 +112,14 @@ impl Phased {
             .chunks_exact(side)
             .zip(self.data.chunks_exact_mut(row_len))
         {
-            // Phase by phase: contiguous writes, reads striding through one cached row.
-            for (i, phase) in out.chunks_exact_mut(self.len).enumerate() {
-                for (o, &v) in phase.iter_mut().zip(row[i..].iter().step_by(period)) {
-                    *o = v;
+            // Period by period: each read a run of `period`, written one to a phase (each
+            // phase's writes contiguous from period to period).
+            for (q, chunk) in row.chunks_exact(period).take(self.runs).enumerate() {
+                for (i, &v) in chunk.iter().enumerate() {
+                    out[i * self.len + q] = v;
                 }
             }
+            out[self.runs] = row[self.runs * period];
         }
     }
 
@@ -307,9 +310,10 @@ pub(super) fn level_two(h: &[f32], side: usize, errors: &mut [f32]) {
 /// Per-square errors of level `s` (`4 <= s < n`) across squares.
 pub(super) fn across_squares(h: &[f32], side: usize, s: usize, scratch: &mut Scratch) {
     let squares = (side - 1) / s;
-    if scratch.phased.data.is_empty() {
+    if !scratch.phased_filled {
         let period = (2 * ACROSS_SQUARES_UP_TO).min(side - 1);
         scratch.phased.fill(h, side, period);
+        scratch.phased_filled = true;
     }
     scratch.prepare(squares);
     let grid = &scratch.phased;
@@ -381,19 +385,31 @@ pub(super) fn along_rows(h: &[f32], side: usize, s: usize, scratch: &mut Scratch
         });
 }
 
-/// Writes `h` transposed into `columns`, in 16 x 16 blocks so reads and writes both stay in
-/// cache.
+/// Writes `h` transposed into `columns`, in 8 x 8 blocks held in registers, so reads and
+/// writes are both runs of eight.
 fn transpose(h: &[f32], side: usize, columns: &mut Vec<f32>) {
-    const BLOCK: usize = 16;
+    const BLOCK: usize = 8;
     columns.resize(side * side, 0.0);
-    for y0 in (0..side).step_by(BLOCK) {
-        for x0 in (0..side).step_by(BLOCK) {
-            for y in y0..(y0 + BLOCK).min(side) {
-                let row = &h[y * side..(y + 1) * side];
-                for x in x0..(x0 + BLOCK).min(side) {
-                    columns[x * side + y] = row[x];
+    let full = side / BLOCK * BLOCK;
+    for y0 in (0..full).step_by(BLOCK) {
+        for x0 in (0..full).step_by(BLOCK) {
+            let mut block = [[0.0f32; BLOCK]; BLOCK];
+            for (r, row) in block.iter_mut().enumerate() {
+                row.copy_from_slice(&h[(y0 + r) * side + x0..][..BLOCK]);
+            }
+            for c in 0..BLOCK {
+                let out = &mut columns[(x0 + c) * side + y0..][..BLOCK];
+                for (o, row) in out.iter_mut().zip(&block) {
+                    *o = row[c];
                 }
             }
+        }
+    }
+    // The rows and columns past the last whole block.
+    for y in 0..side {
+        for x in full..side {
+            columns[x * side + y] = h[y * side + x];
+            columns[y * side + x] = h[x * side + y];
         }
     }
 }
