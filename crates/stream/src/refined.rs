@@ -3,7 +3,7 @@
 use std::sync::{Arc, Mutex};
 
 use globus_geo::Ellipsoid;
-use globus_terrain::refine::{RefineOptions, Refiner};
+use globus_terrain::refine::{BaseNeighbours, RefineOptions, Refiner};
 use globus_terrain::{MeshOptions, TerrainTile};
 use globus_tiling::{GLOBE_SCHEME, TileKey, TilingScheme};
 
@@ -78,39 +78,82 @@ impl RefinedSource {
             let Some(candidate) = GLOBE_SCHEME.ancestor_at(key, level) else {
                 return Ok(None);
             };
-            if let Some(found) = self.cached_base(candidate) {
-                if found.is_some() {
-                    return Ok(found);
-                }
-            } else {
-                let loaded = match self.inner.load(candidate, cancel)? {
-                    Some(mut d) => {
-                        // Refinement textures the base's real colour, so a base whose
-                        // imagery loads separately gets it now.
-                        if d.colour_separate {
-                            d.tile.colour =
-                                self.inner.load_colour(&d, cancel)?.ok_or_else(|| {
-                                    SourceError::Failed {
-                                        key: candidate,
-                                        source_name: self.name.clone(),
-                                        message: "no colour for a base tile".into(),
-                                    }
-                                })?;
-                        }
-                        Some(Arc::new(d.tile))
-                    }
-                    None => None,
-                };
-                self.remember(candidate, loaded.clone());
-                if loaded.is_some() {
-                    return Ok(loaded);
-                }
+            if let Some(found) = self.base_at(candidate, cancel)? {
+                return Ok(Some(found));
             }
             if level == 0 {
                 return Ok(None);
             }
             level -= 1;
         }
+    }
+
+    /// The inner source's tile `key` as a base (with its colour), from the cache or loaded;
+    /// `None` where the source has no data there.
+    fn base_at(
+        &self,
+        key: TileKey,
+        cancel: &Cancel,
+    ) -> Result<Option<Arc<TerrainTile>>, SourceError> {
+        if let Some(found) = self.cached_base(key) {
+            return Ok(found);
+        }
+        let loaded = match self.inner.load(key, cancel)? {
+            Some(mut d) => {
+                // Refinement textures the base's real colour, so a base whose imagery loads
+                // separately gets it now.
+                if d.colour_separate {
+                    d.tile.colour =
+                        self.inner
+                            .load_colour(&d, cancel)?
+                            .ok_or_else(|| SourceError::Failed {
+                                key,
+                                source_name: self.name.clone(),
+                                message: "no colour for a base tile".into(),
+                            })?;
+                }
+                Some(Arc::new(d.tile))
+            }
+            None => None,
+        };
+        self.remember(key, loaded.clone());
+        Ok(loaded)
+    }
+
+    /// The tiles around `base` at its level that refining `key` reads (see
+    /// [`Refiner::neighbours_needed`]): loaded when `load`, else only those cached.
+    fn neighbours_of(
+        &self,
+        base: TileKey,
+        key: TileKey,
+        load: Option<&Cancel>,
+    ) -> Result<[[Option<Arc<TerrainTile>>; 3]; 3], SourceError> {
+        use globus_tiling::Direction;
+        let needed = Refiner::neighbours_needed(base, key);
+        let mut around: [[Option<Arc<TerrainTile>>; 3]; 3] = Default::default();
+        for (r, row) in needed.iter().enumerate() {
+            for (c, &wanted) in row.iter().enumerate() {
+                if !wanted {
+                    continue;
+                }
+                let across = |k: Option<TileKey>, d: usize, less: Direction, more: Direction| {
+                    k.and_then(|k| match d {
+                        0 => k.neighbor(GLOBE_SCHEME, less),
+                        2 => k.neighbor(GLOBE_SCHEME, more),
+                        _ => Some(k),
+                    })
+                };
+                let beside = across(Some(base), c, Direction::West, Direction::East);
+                let Some(neighbour) = across(beside, r, Direction::North, Direction::South) else {
+                    continue;
+                };
+                around[r][c] = match load {
+                    Some(cancel) => self.base_at(neighbour, cancel)?,
+                    None => self.cached_base(neighbour).flatten(),
+                };
+            }
+        }
+        Ok(around)
     }
 
     /// Caches a base tile, or that the inner source has none at `key`.
@@ -158,9 +201,10 @@ impl TileSource for RefinedSource {
         let Some(base) = self.base_for(key, cancel)? else {
             return Ok(None);
         };
+        let around = self.neighbours_of(base.key, key, Some(cancel))?;
         let mut tile = self
             .refiner
-            .refine(&base, key)
+            .refine_among(&base, &borrowed(&around), key)
             .map_err(|e| SourceError::Failed {
                 key,
                 source_name: self.name.clone(),
@@ -253,14 +297,27 @@ impl TerrainSource for RefinedSource {
             return self.inner.height_at(lon_rad, lat_rad);
         };
         let depth = self.max_level - base.key.level();
-        Some(self.refiner.height_at(&base, lon_rad, lat_rad, depth))
+        let deepest = GLOBE_SCHEME.tile_at(lon_rad, lat_rad, self.max_level)?;
+        let around = self.neighbours_of(base.key, deepest, None).ok()?;
+        Some(
+            self.refiner
+                .height_at(&base, &borrowed(&around), lon_rad, lat_rad, depth),
+        )
     }
+}
+
+/// The neighbours as the refiner takes them.
+fn borrowed(around: &[[Option<Arc<TerrainTile>>; 3]; 3]) -> BaseNeighbours<'_> {
+    around
+        .each_ref()
+        .map(|row| row.each_ref().map(Option::as_deref))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::ProceduralSource;
+    use globus_terrain::grid::MESH_SEGMENTS;
 
     #[test]
     fn data_levels_pass_through_and_deeper_levels_are_refined() {
@@ -312,6 +369,40 @@ mod tests {
                 .expect("load")
                 .is_none()
         );
+    }
+
+    /// Refined tiles on either side of a border between base tiles are refined with each
+    /// other's base as a neighbour: their shared edge and their border rings agree (the
+    /// rings are 20-40 m apart where each side extrapolates its own base).
+    #[test]
+    fn refined_tiles_agree_across_base_borders() {
+        let inner: Arc<dyn TerrainSource> = Arc::new(ProceduralSource::new(1, 10));
+        let source =
+            RefinedSource::new(inner, RefineOptions::default(), 22, MeshOptions::default());
+        for depth in [1u8, 3, 6] {
+            let scale = 1u32 << depth;
+            let y = 522 * scale + scale / 2;
+            let west = TileKey::new(10 + depth, 704 * scale - 1, y);
+            let east = TileKey::new(10 + depth, 704 * scale, y);
+            let load = |k| {
+                source
+                    .load(k, &Cancel::new())
+                    .expect("load")
+                    .expect("refined")
+                    .tile
+            };
+            let (w, e) = (load(west), load(east));
+            let n = MESH_SEGMENTS as i32;
+            for j in -1..=n + 1 {
+                let edge = (w.height_at(n, j) - e.height_at(0, j)).abs();
+                let ring = (w.height_at(n + 1, j) - e.height_at(1, j)).abs();
+                let ring_e = (e.height_at(-1, j) - w.height_at(n - 1, j)).abs();
+                assert!(
+                    edge.max(ring).max(ring_e) <= 1e-3,
+                    "{west} | {east} row {j}: edge {edge}, rings {ring} / {ring_e} m"
+                );
+            }
+        }
     }
 
     /// A source with a hole: no data for one level-10 tile.

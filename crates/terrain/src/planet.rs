@@ -366,7 +366,13 @@ impl ProceduralPlanet {
 /// `amplitude_m` (its amplitude times its weight) to add its own slope to the drainage: see
 /// [`ProceduralPlanet::relief_term`].
 #[inline]
-fn gully(octaves: &Octaves, k: usize, p: DVec3, amplitude_m: f64, drainage: &mut Drainage) -> f64 {
+pub(crate) fn gully(
+    octaves: &Octaves,
+    k: usize,
+    p: DVec3,
+    amplitude_m: f64,
+    drainage: &mut Drainage,
+) -> f64 {
     let across = p.normalize_or_zero().cross(drainage.gradient);
     let slope = across.length();
     if slope < 1e-9 || amplitude_m <= 0.0 {
