@@ -11,7 +11,7 @@
 //! The continent-scale fields and every relief octave whose wavelength is at least half the
 //! tile (16 mesh cells) are evaluated on the coarse grid and carried to the mid grid by
 //! Catmull-Rom interpolation (for a wavelength of 16 cells its error is below 2e-4 of the
-//! octave's amplitude). Octaves of 4 to 16 mesh cells (8 to 32 mid samples a wavelength) are
+//! octave's amplitude). Octaves of 2 to 16 mesh cells (4 to 32 mid samples a wavelength) are
 //! added at every mid sample, and the sum is carried on to the fine grid likewise. The
 //! remaining octaves, down to twice the fine spacing, are evaluated at every fine sample.
 //! Octaves finer than that are left out and their largest possible contribution is added to
@@ -22,12 +22,14 @@
 //! grid is evaluated directly.
 //!
 //! Why the mid grid: in the mountains the gully octaves (slope-following stripes, several
-//! times a noise octave's cost) take most of a tile's time, and the two coarsest of those at
+//! times a noise octave's cost) take most of a tile's time, and the three coarsest of those at
 //! fine samples cost as much at a quarter of the samples. `cargo bench -p globus-terrain
-//! --bench terrain -- "generate_tile alps"`, one after the other on a 2-core machine: level 10
-//! 14.65 -> 12.32 ms, level 14 16.36 -> 13.45 ms (medians, two grids -> three); mesh heights
-//! and geometric errors unchanged (mesh vertices are exact either way), colour images differ by
-//! 0.14-0.39 of 255 on average.
+//! --bench terrain -- "generate_tile alps"` on a 2-core machine, medians: level 10 14.65 ms on
+//! two grids, 12.32 with octaves of 4-16 cells on the mid grid, 10.45 with 2-16 cells; level
+//! 14 16.36, 13.45 and 11.52 ms. Mesh heights and geometric errors are unchanged (mesh
+//! vertices are exact either way); colour images differ from the two grids' by 0.21-0.57 of
+//! 255 on average (1.5 % of texels by more than 8 at level 10; side by side I could not tell
+//! them apart).
 //!
 //! Which octaves are used depends only on the tile's level, and positions on a shared edge
 //! are computed from the shared edge coordinates, so neighbours at the same level produce
@@ -89,8 +91,8 @@ const PATCH_WAVELENGTH_M: f64 = 8_000.0;
 
 /// Octaves at least this many mesh cells long are evaluated on the coarse grid.
 const COARSE_OCTAVE_CELLS: f64 = 16.0;
-/// Octaves at least this many mesh cells long (8 mid samples) are evaluated on the mid grid.
-const MID_OCTAVE_CELLS: f64 = 4.0;
+/// Octaves at least this many mesh cells long (4 mid samples) are evaluated on the mid grid.
+const MID_OCTAVE_CELLS: f64 = 2.0;
 
 /// Quantities carried from the coarse to the fine grid.
 #[derive(Clone, Copy, Default)]
