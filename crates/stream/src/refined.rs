@@ -148,7 +148,16 @@ impl RefinedSource {
                     continue;
                 };
                 around[r][c] = match load {
-                    Some(cancel) => self.base_at(neighbour, cancel)?,
+                    // A neighbour that fails to load is left out (the base's own ring stands
+                    // in) rather than failing this tile for good; a cancel still stops it.
+                    Some(cancel) => match self.base_at(neighbour, cancel) {
+                        Ok(found) => found,
+                        Err(e @ SourceError::Cancelled { .. }) => return Err(e),
+                        Err(e) => {
+                            tracing::debug!("refining {key} without neighbour {neighbour}: {e}");
+                            None
+                        }
+                    },
                     None => self.cached_base(neighbour).flatten(),
                 };
             }
@@ -407,6 +416,79 @@ mod tests {
 
     /// A source with a hole: no data for one level-10 tile.
     struct Holey(ProceduralSource, TileKey);
+
+    /// A source whose tile `1` fails to load.
+    struct Failing(ProceduralSource, TileKey);
+
+    impl TileSource for Failing {
+        type Tile = TerrainData;
+        fn name(&self) -> &str {
+            "failing"
+        }
+        fn scheme(&self) -> TilingScheme {
+            GLOBE_SCHEME
+        }
+        fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
+            if key == self.1 {
+                return Err(SourceError::Failed {
+                    key,
+                    source_name: "failing".into(),
+                    message: "corrupt".into(),
+                });
+            }
+            self.0.load(key, cancel)
+        }
+        fn byte_size(&self, tile: &TerrainData) -> usize {
+            tile.byte_size()
+        }
+    }
+
+    impl TerrainSource for Failing {
+        fn ellipsoid(&self) -> &Ellipsoid {
+            self.0.ellipsoid()
+        }
+        fn occluder(&self) -> &Ellipsoid {
+            self.0.occluder()
+        }
+        fn height_range_m(&self) -> (f64, f64) {
+            self.0.height_range_m()
+        }
+        fn max_level(&self) -> u8 {
+            self.0.max_level()
+        }
+    }
+
+    /// A neighbouring base that fails to load is left out: the tile near the border is
+    /// refined from its own base alone instead of failing; the failing base's own tiles fail.
+    #[test]
+    fn a_neighbour_that_fails_is_left_out() {
+        let broken = TileKey::new(10, 704, 522);
+        let inner = Arc::new(Failing(ProceduralSource::new(1, 10), broken));
+        let source = RefinedSource::new(
+            inner.clone(),
+            RefineOptions::default(),
+            16,
+            MeshOptions::default(),
+        );
+        let key = TileKey::new(12, 704 * 4 - 1, 522 * 4 + 1);
+        let tile = source
+            .load(key, &Cancel::new())
+            .expect("refined without the neighbour")
+            .expect("tile");
+        let base = inner
+            .load(TileKey::new(10, 703, 522), &Cancel::new())
+            .expect("load")
+            .expect("base");
+        let alone = Refiner::new(RefineOptions::default(), Ellipsoid::WGS84)
+            .refine(&base.tile, key)
+            .expect("refine");
+        assert_eq!(tile.tile.heights_m, alone.heights_m);
+        assert!(
+            source
+                .load(TileKey::new(12, 704 * 4, 522 * 4 + 1), &Cancel::new())
+                .is_err()
+        );
+    }
 
     impl TileSource for Holey {
         type Tile = TerrainData;
