@@ -414,47 +414,52 @@ mod tests {
         }
     }
 
-    /// A source with a hole: no data for one level-10 tile.
-    struct Holey(ProceduralSource, TileKey);
+    /// A procedural source with one tile (and what lies under it) missing: no data, or a
+    /// failed load when `fails`.
+    struct Gap {
+        inner: ProceduralSource,
+        missing: TileKey,
+        fails: bool,
+    }
 
-    /// A source whose tile `1` fails to load.
-    struct Failing(ProceduralSource, TileKey);
-
-    impl TileSource for Failing {
+    impl TileSource for Gap {
         type Tile = TerrainData;
         fn name(&self) -> &str {
-            "failing"
+            "gap"
         }
         fn scheme(&self) -> TilingScheme {
             GLOBE_SCHEME
         }
         fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-            if key == self.1 {
+            if !GLOBE_SCHEME.contains(self.missing, key) {
+                return self.inner.load(key, cancel);
+            }
+            if self.fails {
                 return Err(SourceError::Failed {
                     key,
-                    source_name: "failing".into(),
+                    source_name: "gap".into(),
                     message: "corrupt".into(),
                 });
             }
-            self.0.load(key, cancel)
+            Ok(None)
         }
         fn byte_size(&self, tile: &TerrainData) -> usize {
             tile.byte_size()
         }
     }
 
-    impl TerrainSource for Failing {
+    impl TerrainSource for Gap {
         fn ellipsoid(&self) -> &Ellipsoid {
-            self.0.ellipsoid()
+            self.inner.ellipsoid()
         }
         fn occluder(&self) -> &Ellipsoid {
-            self.0.occluder()
+            self.inner.occluder()
         }
         fn height_range_m(&self) -> (f64, f64) {
-            self.0.height_range_m()
+            self.inner.height_range_m()
         }
         fn max_level(&self) -> u8 {
-            self.0.max_level()
+            self.inner.max_level()
         }
     }
 
@@ -463,7 +468,11 @@ mod tests {
     #[test]
     fn a_neighbour_that_fails_is_left_out() {
         let broken = TileKey::new(10, 704, 522);
-        let inner = Arc::new(Failing(ProceduralSource::new(1, 10), broken));
+        let inner = Arc::new(Gap {
+            inner: ProceduralSource::new(1, 10),
+            missing: broken,
+            fails: true,
+        });
         let source = RefinedSource::new(
             inner.clone(),
             RefineOptions::default(),
@@ -490,44 +499,14 @@ mod tests {
         );
     }
 
-    impl TileSource for Holey {
-        type Tile = TerrainData;
-        fn name(&self) -> &str {
-            "holey"
-        }
-        fn scheme(&self) -> TilingScheme {
-            GLOBE_SCHEME
-        }
-        fn load(&self, key: TileKey, cancel: &Cancel) -> Result<Option<TerrainData>, SourceError> {
-            if GLOBE_SCHEME.contains(self.1, key) {
-                return Ok(None);
-            }
-            self.0.load(key, cancel)
-        }
-        fn byte_size(&self, tile: &TerrainData) -> usize {
-            tile.byte_size()
-        }
-    }
-
-    impl TerrainSource for Holey {
-        fn ellipsoid(&self) -> &Ellipsoid {
-            self.0.ellipsoid()
-        }
-        fn occluder(&self) -> &Ellipsoid {
-            self.0.occluder()
-        }
-        fn height_range_m(&self) -> (f64, f64) {
-            self.0.height_range_m()
-        }
-        fn max_level(&self) -> u8 {
-            self.0.max_level()
-        }
-    }
-
     #[test]
     fn holes_in_the_data_are_refined_from_the_nearest_ancestor_with_data() {
         let hole = TileKey::new(10, 703, 522);
-        let inner = Arc::new(Holey(ProceduralSource::new(1, 10), hole));
+        let inner = Arc::new(Gap {
+            inner: ProceduralSource::new(1, 10),
+            missing: hole,
+            fails: false,
+        });
         let source =
             RefinedSource::new(inner, RefineOptions::default(), 16, MeshOptions::default());
         let parent = source

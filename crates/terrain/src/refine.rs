@@ -222,34 +222,19 @@ impl<'a> Base<'a> {
     }
 
     /// Catmull-Rom of the base heights at grid coordinates (cells -1..=33).
+    #[cfg(test)]
     fn cubic(&self, x: f64, y: f64) -> f64 {
-        let (cx, cy) = (cubic_cell(x), cubic_cell(y));
-        let (wx, wy) = (
-            catmull_rom(x - f64::from(cx)),
-            catmull_rom(y - f64::from(cy)),
-        );
-        let mut sum = 0.0;
-        for (b, wyb) in wy.iter().enumerate() {
-            let j = cy - 1 + b as i32;
-            let mut row = 0.0;
-            for (a, wxa) in wx.iter().enumerate() {
-                row += wxa * self.sample(cx - 1 + a as i32, j);
-            }
-            sum += wyb * row;
-        }
-        sum
+        self.cubic_with_slope(x, y).0
     }
 
-    /// What the gully octaves follow at grid coordinates: the cubic's gradient, per metre,
-    /// in ECEF at the point (`lon`, `lat`), and for how fast it turns the roughness layer
-    /// over the spacing squared (continuous, where the cubic's own second derivative jumps
-    /// from cell to cell and would tear the gullies along the base grid's lines).
-    fn drainage(&self, x: f64, y: f64, lon: f64, lat: f64) -> Drainage {
+    /// The cubic and its derivatives in x and y (grid units), from one read of its 16
+    /// samples.
+    fn cubic_with_slope(&self, x: f64, y: f64) -> (f64, f64, f64) {
         let (cx, cy) = (cubic_cell(x), cubic_cell(y));
         let (tx, ty) = (x - f64::from(cx), y - f64::from(cy));
         let (wx, dx) = (catmull_rom(tx), catmull_rom_d(tx));
         let (wy, dy) = (catmull_rom(ty), catmull_rom_d(ty));
-        let (mut hx, mut hy) = (0.0, 0.0);
+        let (mut h, mut hx, mut hy) = (0.0, 0.0, 0.0);
         for b in 0..4 {
             let j = cy - 1 + b as i32;
             let (mut w, mut d) = (0.0, 0.0);
@@ -258,9 +243,19 @@ impl<'a> Base<'a> {
                 w += wx[a] * s;
                 d += dx[a] * s;
             }
+            h += wy[b] * w;
             hx += wy[b] * d;
             hy += dy[b] * w;
         }
+        (h, hx, hy)
+    }
+
+    /// What the gully octaves follow, from the cubic's derivatives `(hx, hy)` (grid units)
+    /// at grid coordinates `(x, y)`: its gradient per metre in ECEF at the point (`lon`,
+    /// `lat`), and for how fast it turns the roughness layer over the spacing squared
+    /// (continuous, where the cubic's own second derivative jumps from cell to cell and would
+    /// tear the gullies along the base grid's lines).
+    fn drainage(&self, (x, y): (f64, f64), (hx, hy): (f64, f64), lon: f64, lat: f64) -> Drainage {
         // Grid units to metres: x runs east, y south.
         let n = f64::from(MESH_SEGMENTS);
         let sx = (self.rect.width() / n * self.radius_m * lat.cos()).max(1e-6);
@@ -513,7 +508,7 @@ impl Refiner {
         count: usize,
     ) -> (f64, f64) {
         let (x, y) = b.grid_xy(lon, lat);
-        let smooth = b.cubic(x, y);
+        let (smooth, hx, hy) = b.cubic_with_slope(x, y);
         let amp = (self.options.roughness_gain * b.roughness(x, y)).min(0.5 * smooth.max(0.0));
         if amp <= 0.0 || count == 0 {
             return (smooth, amp.max(0.0));
@@ -525,7 +520,7 @@ impl Refiner {
         // Each octave is mostly a gully octave running down the slope of the base surface
         // and of the coarser gullies, the rest plain noise (the gully fades out on gentle
         // ground); both are at most NOISE_BOUND in size, as the error bounds assume.
-        let mut drainage = b.drainage(x, y, lon, lat);
+        let mut drainage = b.drainage((x, y), (hx, hy), lon, lat);
         let detail: f64 = (0..count)
             .map(|k| {
                 let w = (1.0 - q) * q.powi(k as i32);
@@ -814,7 +809,8 @@ mod tests {
             let lon = lerp_exact(rect.west, rect.east, 0.1 + 0.8 * (t * 0.618_034).fract());
             let lat = lerp_exact(rect.north, rect.south, 0.1 + 0.8 * (t * 0.754_878).fract());
             let (x, y) = b.grid_xy(lon, lat);
-            let g = b.drainage(x, y, lon, lat).gradient;
+            let (_, hx, hy) = b.cubic_with_slope(x, y);
+            let g = b.drainage((x, y), (hx, hy), lon, lat).gradient;
             let (east, north) = (
                 DVec3::new(-lon.sin(), lon.cos(), 0.0),
                 DVec3::new(-lat.sin() * lon.cos(), -lat.sin() * lon.sin(), lat.cos()),
