@@ -310,15 +310,19 @@ impl Residency {
         Some(resident)
     }
 
-    /// Evicts the least recently used tile not used this frame.
+    /// Evicts the least recently used tile not used this frame; tiles of the coarsest levels
+    /// only when no finer one is left ([`globus_tiling::keeps_longer`]).
     fn evict_oldest(&mut self) -> Option<TileKey> {
         let (index, _) = self
             .slots
             .iter()
             .enumerate()
-            .filter_map(|(i, s)| s.as_ref().map(|s| (i, s.last_used)))
-            .filter(|&(_, used)| used < self.frame)
-            .min_by_key(|&(_, used)| used)?;
+            .filter_map(|(i, s)| {
+                s.as_ref()
+                    .map(|s| (i, (globus_tiling::keeps_longer(s.key), s.last_used)))
+            })
+            .filter(|&(_, (_, used))| used < self.frame)
+            .min_by_key(|&(_, rank)| rank)?;
         let victim = self.slots[index].take()?;
         self.slot_of.remove(&victim.key);
         self.free_slots.push(victim.slot);

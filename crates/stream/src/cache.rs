@@ -115,20 +115,21 @@ impl<V> LruCache<V> {
     }
 
     /// Evicts least recently used entries, skipping those for which `protect(key, last_used)`
-    /// is true, until the cache fits its budget. Returns the evicted keys.
+    /// is true, until the cache fits its budget; tiles of the coarsest levels go only after
+    /// every finer one ([`globus_tiling::keeps_longer`]). Returns the evicted keys.
     pub fn evict_to_budget(&mut self, protect: impl Fn(TileKey, u64) -> bool) -> Vec<TileKey> {
         if self.bytes <= self.budget {
             return Vec::new();
         }
-        let mut candidates: Vec<(u64, TileKey)> = self
+        let mut candidates: Vec<(bool, u64, TileKey)> = self
             .map
             .iter()
             .filter(|(k, e)| !protect(**k, e.last_used))
-            .map(|(k, e)| (e.last_used, *k))
+            .map(|(k, e)| (globus_tiling::keeps_longer(*k), e.last_used, *k))
             .collect();
         candidates.sort_unstable();
         let mut evicted = Vec::new();
-        for (_, key) in candidates {
+        for (_, _, key) in candidates {
             if self.bytes <= self.budget {
                 break;
             }
@@ -197,6 +198,30 @@ mod tests {
         assert_eq!(evicted, vec![k(2), k(3)]);
         assert!(c.contains(k(0)) && c.contains(k(1)) && c.contains(k(4)));
         assert_eq!(c.bytes(), 30);
+    }
+
+    #[test]
+    fn the_coarsest_levels_go_last() {
+        // A level-1 tile unused for longest, then deeper ones: the deeper ones go first,
+        // oldest first, and the coarse tile only when nothing else is left.
+        let mut c = LruCache::new(20);
+        c.insert(TileKey::new(1, 0, 0), 0, 10, 0);
+        for x in 0..3 {
+            c.insert(k(x), x, 10, u64::from(x) + 1);
+        }
+        assert_eq!(c.evict_to_budget(|_, _| false), vec![k(0), k(1)]);
+        assert!(c.contains(TileKey::new(1, 0, 0)));
+        c.resize(k(2), 15);
+        assert_eq!(
+            c.evict_to_budget(|_, _| false),
+            vec![k(2)],
+            "a deeper tile goes even when it alone brings the cache under"
+        );
+        c.insert(k(3), 3, 15, 5);
+        assert_eq!(
+            c.evict_to_budget(|key, _| key == k(3)),
+            vec![TileKey::new(1, 0, 0)]
+        );
     }
 
     #[test]

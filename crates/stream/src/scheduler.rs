@@ -209,6 +209,13 @@ type Message<T> = (TileKey, Outcome<T>);
 
 /// Worker priority on the crate's 0 (lowest) to 99 scale; 37 maps to nice 5 on Linux.
 const WORKER_PRIORITY: u8 = 37;
+/// Loaded tiles that may wait for the render thread's [`Scheduler::drain`] (once a frame)
+/// before the workers stop to wait for it: what a stalled consumer holds outside the memory
+/// budget. It bounds how many tiles a frame can take in, so it must cover a slow frame's
+/// loads: four per worker (8 on two cores) held `globus bench --path paths/alps-dive.json`
+/// on a software rasteriser (0.4-2 s frames) to 9-10 arrivals a frame, with the workers idle
+/// most of each frame and hundreds of wanted tiles waiting.
+const RESULTS_WAITING: usize = 64;
 /// Longest a worker sleeps before looking at the clock again (a fake clock moves without
 /// notifying).
 const MAX_IDLE_WAIT: Duration = Duration::from_millis(100);
@@ -253,7 +260,7 @@ impl<S: TileSource + ?Sized> Scheduler<S> {
             clock,
             retry: options.retry,
         });
-        let (tx, rx) = bounded(workers * 4);
+        let (tx, rx) = bounded(RESULTS_WAITING.max(workers * 4));
         let handles = (0..workers)
             .map(|i| {
                 let shared = Arc::clone(&shared);

@@ -37,5 +37,5 @@ pub const GLOBE_SCHEME: TilingScheme = TilingScheme::GeographicReduced;
 
 pub use select::{
     DrawTile, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle, TileRequest,
-    TileState, morph_fraction, select, select_into,
+    TileState, keeps_longer, morph_fraction, select, select_into,
 };
