@@ -114,9 +114,9 @@ pub fn morph_fraction(parent_excess: f64, error_ratio: f64) -> f64 {
 const KEPT_LONGER_LEVEL: u8 = 2;
 
 /// Whether caches and GPU pools should keep `key` until no finer tile is left to give up:
-/// the tiles of levels 0 to 2 (42 on the engine's grid). Some of them are under every view,
-/// and selection draws a parent whole while any visible child is missing, so one of them
-/// evicted by plain recency (a quadrant out of view for a while) sends its whole quadrant
+/// the tiles of levels 0 to 2 (at most 42 on the engine's grid). Some of them are under
+/// every view, and selection draws a parent whole while any visible child is missing, so one
+/// of them evicted by plain recency (a quadrant out of view for a while) sends its whole quadrant
 /// back to the root for the frames it takes to load again: on `paths/alps-dive.json` with a
 /// full cache, two frames drew the 2 roots between frames of 300-450 tiles while the camera
 /// turned (with this rule, none does).
