@@ -12,6 +12,7 @@
 //!    whole, or an ancestor's cropped while its own imagery loads).
 
 use std::mem::size_of;
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use bytemuck::{Pod, Zeroable};
@@ -429,6 +430,7 @@ impl GlobeRenderer {
         let mut borrowed_colour = 0;
         let mut missing_colour = 0;
         let mut triangles = 0u64;
+        let mut tiles = 0u32;
         let now = Instant::now();
         for tile in inputs.tiles {
             let key = tile.key;
@@ -462,15 +464,24 @@ impl GlobeRenderer {
                 parent_colour: parent_map,
                 morph: [morph, parent_layer as f32, colour_share, 0.0],
             };
-            let index_count = r.indices.len() as u32;
-            triangles += u64::from(index_count / 3);
-            self.draws.push(DrawIndexedArgs {
-                index_count,
-                instance_count: 1,
-                first_index: r.indices.start,
-                base_vertex: r.vertices.start as i32,
-                first_instance: 0,
-            });
+            // The whole tile, or the quadrants selection left it (its loaded children are
+            // drawn over the rest).
+            tiles += 1;
+            let (first, base_vertex) = (r.indices.start, r.vertices.start as i32);
+            let mut push = |range: Range<u32>| {
+                triangles += u64::from(range.len() as u32 / 3);
+                self.draws.push(DrawIndexedArgs {
+                    index_count: range.len() as u32,
+                    instance_count: 1,
+                    first_index: first + range.start,
+                    base_vertex,
+                    first_instance: 0,
+                });
+            };
+            match r.quadrants {
+                Some(q) => q.ranges(tile.parts, &mut push),
+                None => push(0..r.indices.len() as u32),
+            }
         }
         let count = self.draws.len() as u32;
         if count > self.indirect_capacity {
@@ -491,7 +502,7 @@ impl GlobeRenderer {
         }
         self.stats = DrawStats {
             draw_calls: if count > 0 { 2 } else { 1 },
-            tiles: count,
+            tiles,
             triangles,
             missing,
             borrowed_colour,

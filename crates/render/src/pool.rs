@@ -24,7 +24,7 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use globus_geo::DVec3;
 use globus_terrain::grid::COLOUR_SIZE;
-use globus_terrain::{ColourImage, MorphVertex, TerrainVertex, TileMesh};
+use globus_terrain::{ColourImage, MeshQuadrants, MorphVertex, TerrainVertex, TileMesh};
 use globus_tiling::{GLOBE_SCHEME, TileKey};
 use rustc_hash::FxHashMap;
 
@@ -124,6 +124,9 @@ pub struct Resident {
     pub centre: DVec3,
     /// Whether its colour layer holds its own colour (else it borrows an ancestor's).
     pub own_colour: bool,
+    /// Where its quadrants are among its indices (relative to `indices.start`), once its
+    /// mesh is uploaded.
+    pub quadrants: Option<MeshQuadrants>,
     last_used: u64,
 }
 
@@ -238,6 +241,15 @@ impl Residency {
         }
     }
 
+    /// Records where a resident tile's quadrants are among its indices.
+    pub fn set_quadrants(&mut self, key: TileKey, quadrants: MeshQuadrants) {
+        if let Some(&s) = self.slot_of.get(&key)
+            && let Some(r) = self.slots[s as usize].as_mut()
+        {
+            r.quadrants = Some(quadrants);
+        }
+    }
+
     /// Marks a resident tile as used this frame.
     pub fn touch(&mut self, key: TileKey) {
         if let Some(&s) = self.slot_of.get(&key)
@@ -303,6 +315,7 @@ impl Residency {
             indices: i,
             centre,
             own_colour: false,
+            quadrants: None,
             last_used: self.frame,
         };
         self.slots[slot as usize] = Some(resident.clone());
@@ -575,6 +588,7 @@ impl TilePool {
             u64::from(r.indices.start) * 4,
             bytemuck::cast_slice(&mesh.indices),
         );
+        self.residency.set_quadrants(key, mesh.quadrants);
         if let Some(colour) = colour {
             self.write_colour(queue, r.slot, colour);
             self.residency.set_own_colour(key);

@@ -1184,6 +1184,7 @@ fn imagery_loads_on_its_own_after_the_terrain_it_drapes() {
         sse_px: 4.0,
         distance_m: 1e6,
         morph: 1.0,
+        parts: globus_tiling::Quadrants::ALL,
     });
     while !matches!(layer.colour(tile), Some(TileColour::Ready(_))) {
         assert!(Instant::now() < deadline, "imagery never arrived");

@@ -28,10 +28,13 @@ pub const MESH_SIDE: u32 = MESH_SEGMENTS + 1;
 pub const HEIGHT_GRID_SIDE: usize = MESH_SIDE as usize + 2;
 /// Colour texels per tile side.
 pub const COLOUR_SIZE: u32 = 128;
-/// Vertices of the largest tile mesh: every sample and one skirt vertex per edge sample.
-pub const MAX_MESH_VERTICES: u32 = MESH_SIDE * MESH_SIDE + 4 * MESH_SIDE;
-/// Indices of the largest tile mesh: two triangles per cell and per skirt segment.
-pub const MAX_MESH_INDICES: u32 = (2 * MESH_SEGMENTS * MESH_SEGMENTS + 4 * 2 * MESH_SEGMENTS) * 3;
+/// Vertices of the largest tile mesh: every sample and one skirt vertex per sample on an
+/// edge or on one of the two midlines.
+pub const MAX_MESH_VERTICES: u32 = MESH_SIDE * MESH_SIDE + 6 * MESH_SIDE;
+/// Indices of the largest tile mesh: two triangles per cell and per skirt segment (one skirt
+/// under each edge, two under each midline: one facing either way).
+pub const MAX_MESH_INDICES: u32 =
+    (2 * MESH_SEGMENTS * MESH_SEGMENTS + 4 * 2 * MESH_SEGMENTS + 2 * 2 * 2 * MESH_SEGMENTS) * 3;
 
 /// Whether the full-resolution mesh cuts cell (`i`, `j`) from its north-west to its
 /// south-east corner (else from north-east to south-west).

@@ -32,7 +32,9 @@ mod tile;
 /// mistake or a crafted file, and is refused where it is read.
 pub const MAX_ABS_HEIGHT_M: f64 = 100_000.0;
 
-pub use mesh::{MeshOptions, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal};
+pub use mesh::{
+    MeshOptions, MeshQuadrants, TerrainVertex, TileMesh, decode_oct_normal, encode_oct_normal,
+};
 pub use morph::MorphVertex;
 pub use planet::{Drainage, Fields, ProceduralPlanet, Relief};
 pub use tile::{ColourImage, TerrainTile};

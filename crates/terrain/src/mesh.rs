@@ -17,9 +17,11 @@
 //! the geometric error so it closes the largest crack that a neighbour up to two levels
 //! coarser can leave (Ulrich 2002; Zeitler 2015, section 4.10; Cesium does the same).
 
+use std::ops::Range;
+
 use bytemuck::{Pod, Zeroable};
 use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid};
-use globus_tiling::{GLOBE_SCHEME, TileBounds, TileKey};
+use globus_tiling::{GLOBE_SCHEME, Quadrants, TileBounds, TileKey};
 
 use crate::TerrainTile;
 use crate::adaptive::{AdaptiveMesh, HeightGrid, Rtin};
@@ -74,10 +76,15 @@ pub struct TileMesh {
     pub key: TileKey,
     /// The tile's origin in ECEF: every vertex is relative to it.
     pub centre: DVec3,
-    /// The surface vertices, then one skirt vertex per edge vertex.
+    /// The surface vertices, then one skirt vertex per edge vertex (north, east, south and
+    /// west edges), then one per vertex on the tile's north-south and west-east midlines.
     pub vertices: Vec<TerrainVertex>,
-    /// Triangle list, counter-clockwise seen from outside; surface triangles first.
+    /// Triangle list, counter-clockwise seen from outside: the surface triangles, then the
+    /// skirt walls under the edges, then the inner skirts, each by quadrant (see
+    /// [`MeshQuadrants`]).
     pub indices: Vec<u32>,
+    /// Where each quadrant's triangles are in `indices`.
+    pub quadrants: MeshQuadrants,
     /// Triangles of the surface (the rest are skirt walls).
     pub surface_triangles: u32,
     /// Exact bounds of all vertices, skirts included.
@@ -129,12 +136,13 @@ impl TileMesh {
             SKIRT_ERROR_FACTOR * geometric_error_m * exaggeration + 0.02 * spacing_m;
 
         let edges = adaptive.edge_vertices();
+        let midlines = midline_vertices(&adaptive);
         let surface = adaptive.vertices.len();
-        let skirt_count: usize = edges.iter().map(Vec::len).sum();
+        let skirt_count: usize = edges.iter().chain(&midlines).map(Vec::len).sum();
         let mut grid_of = Vec::with_capacity(surface + skirt_count);
         grid_of.extend(adaptive.vertices.iter().map(|&[i, j]| (i, j, false)));
-        for edge in &edges {
-            grid_of.extend(edge.iter().map(|&v| {
+        for line in edges.iter().chain(&midlines) {
+            grid_of.extend(line.iter().map(|&v| {
                 let [i, j] = adaptive.vertices[v as usize];
                 (i, j, true)
             }));
@@ -181,12 +189,13 @@ impl TileMesh {
                 }
             })
             .collect();
-        let indices = triangles_with_skirts(&adaptive, &edges);
+        let (indices, quadrants) = triangles_by_quadrant(&adaptive, &edges, &midlines);
         Self {
             key: tile.key,
             centre,
             vertices,
             indices,
+            quadrants,
             surface_triangles: adaptive.triangles.len() as u32,
             bounds,
             skirt_depth_m,
@@ -286,9 +295,11 @@ fn cut(
     }
     // Sagitta of a right triangle with legs of L cells (hypotenuse L sqrt 2): the body bulges
     // (L s)^2 / (4 R) under its circumcircle. Allow half the budget for that.
+    // Legs of at most half the tile: every triangle lies in one quadrant (see
+    // [`MeshQuadrants`]).
     let max_leg = ((2.0 * radius_m * budget).sqrt() / spacing_m)
         .floor()
-        .clamp(1.0, f64::from(MESH_SEGMENTS)) as u16;
+        .clamp(1.0, f64::from(MESH_SEGMENTS / 2)) as u16;
     // Along a parallel the surface also curves sideways, round a circle of radius R cos(lat):
     // near a pole far tighter than R, and a reduced polar tile is wide. A north or south
     // edge's chord strays inside that circle where a narrower neighbour's chords do not: a
@@ -324,27 +335,175 @@ fn cut(
     (mesh, error)
 }
 
-/// The surface triangles, then skirt walls under each edge facing outwards.
-fn triangles_with_skirts(mesh: &AdaptiveMesh, edges: &[Vec<u32>; 4]) -> Vec<u32> {
-    let skirt_count: usize = edges.iter().map(Vec::len).sum();
-    let mut idx = Vec::with_capacity(mesh.triangles.len() * 3 + skirt_count * 6);
-    idx.extend(mesh.triangles.iter().flatten());
-    let mut skirt = mesh.vertices.len() as u32;
-    // Edges are sorted north (west to east), east (north to south), south, west: walls on the
-    // north and east edges wind (g0, g1, s0), those on the south and west (g0, s0, g1).
-    for (e, edge) in edges.iter().enumerate() {
-        for k in 1..edge.len() as u32 {
-            let (g0, g1) = (edge[k as usize - 1], edge[k as usize]);
-            let (s0, s1) = (skirt + k - 1, skirt + k);
-            if e < 2 {
-                idx.extend_from_slice(&[g0, g1, s0, g1, s1, s0]);
-            } else {
-                idx.extend_from_slice(&[g0, s0, g1, g1, s0, s1]);
+/// Where the quadrants of a tile's mesh lie in its index list, so a renderer can draw part
+/// of a tile: selection draws a tile over the quadrants of its children that are still
+/// loading while the loaded ones are drawn over the rest ([`globus_tiling::DrawTile::parts`]).
+///
+/// Meshes are cut to triangles with legs of at most half the tile, so no triangle crosses
+/// a midline and each lies in one quadrant (a flat tile has 8 triangles, not 2). The index
+/// list holds the surface triangles quadrant by quadrant (north-west, north-east,
+/// south-west, south-east, as [`globus_tiling::Quadrants`] numbers them), then the skirt
+/// walls under the tile's edges the same way, then the inner skirts: walls under each
+/// quadrant's two edges on the midlines, facing the neighbouring quadrant. A child drawn
+/// beside a part has skirts of its own, facing the part; the inner skirts close the crack
+/// seen from the child's side, where the part's edge is the higher. A whole tile is drawn
+/// without them ([`MeshQuadrants::whole`]): under a continuous surface they would never show.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MeshQuadrants {
+    /// Index offsets: section `s` (0 surface, 1 edge skirts, 2 inner skirts) of quadrant `q`
+    /// is `ends[4 s + q] .. ends[4 s + q + 1]`.
+    ends: [u32; 13],
+}
+
+impl MeshQuadrants {
+    /// The indices of the whole tile: its surface and edge skirts.
+    pub fn whole(&self) -> Range<u32> {
+        0..self.ends[8]
+    }
+
+    /// The indices of the surface triangles.
+    pub fn surface(&self) -> Range<u32> {
+        0..self.ends[4]
+    }
+
+    /// The indices of the skirt walls under the tile's edges.
+    pub fn edge_skirts(&self) -> Range<u32> {
+        self.ends[4]..self.ends[8]
+    }
+
+    /// Section `section` (0 surface, 1 edge skirts, 2 inner skirts) of quadrant `q`.
+    pub fn section(&self, section: usize, q: usize) -> Range<u32> {
+        self.ends[4 * section + q]..self.ends[4 * section + q + 1]
+    }
+
+    /// Calls `f` with the index ranges that draw the quadrants in `parts` (with their inner
+    /// skirts unless all are drawn), in index order, adjacent ones merged: at most 6.
+    pub fn ranges(&self, parts: Quadrants, mut f: impl FnMut(Range<u32>)) {
+        if parts.is_all() {
+            f(self.whole());
+            return;
+        }
+        let mut run: Option<Range<u32>> = None;
+        for section in 0..3 {
+            for q in (0..4).filter(|&q| parts.contains(q)) {
+                let r = self.section(section, q);
+                if r.is_empty() {
+                    continue;
+                }
+                match &mut run {
+                    Some(open) if open.end == r.start => open.end = r.end,
+                    _ => {
+                        if let Some(done) = run.replace(r) {
+                            f(done);
+                        }
+                    }
+                }
             }
+        }
+        if let Some(done) = run {
+            f(done);
+        }
+    }
+}
+
+/// The surface vertices on the tile's midlines, sorted along them: the north-south one (x
+/// half the grid, north to south) and the west-east one (y half the grid, west to east).
+fn midline_vertices(mesh: &AdaptiveMesh) -> [Vec<u32>; 2] {
+    let half = ((mesh.side - 1) / 2) as u16;
+    let mut lines: [Vec<(u16, u32)>; 2] = Default::default();
+    for (i, &[x, y]) in mesh.vertices.iter().enumerate() {
+        if x == half {
+            lines[0].push((y, i as u32));
+        }
+        if y == half {
+            lines[1].push((x, i as u32));
+        }
+    }
+    lines.map(|mut l| {
+        l.sort_unstable();
+        l.into_iter().map(|(_, i)| i).collect()
+    })
+}
+
+/// The index list and its quadrants (see [`MeshQuadrants`]): surface triangles, skirt walls
+/// under each edge facing outwards, inner walls under each quadrant's midline edges facing
+/// the next quadrant. `edges` and `midlines` hold surface vertices; their skirt vertices
+/// follow the surface ones in the same order.
+fn triangles_by_quadrant(
+    mesh: &AdaptiveMesh,
+    edges: &[Vec<u32>; 4],
+    midlines: &[Vec<u32>; 2],
+) -> (Vec<u32>, MeshQuadrants) {
+    let twice_half = (mesh.side - 1) as u32; // twice the midline coordinate
+    let grid = |v: u32| mesh.vertices[v as usize].map(u32::from);
+    // The quadrant of a segment or triangle from the sum of its corners' coordinates.
+    let quadrant = |sx: u32, sy: u32, corners: u32| {
+        usize::from(sy * 2 >= twice_half * corners) * 2
+            + usize::from(sx * 2 >= twice_half * corners)
+    };
+    let skirt_count: usize = edges.iter().chain(midlines).map(Vec::len).sum();
+    let mut sections: [Vec<u32>; 12] = Default::default();
+    for t in &mesh.triangles {
+        let c = t.map(grid);
+        let q = quadrant(c[0][0] + c[1][0] + c[2][0], c[0][1] + c[1][1] + c[2][1], 3);
+        debug_assert!(
+            c.iter().all(|p| quadrant(p[0] * 2, p[1] * 2, 2) == q
+                || p[0] == twice_half / 2
+                || p[1] == twice_half / 2),
+            "a triangle crosses a midline"
+        );
+        sections[q].extend_from_slice(t);
+    }
+    // A wall under the segment g0-g1 (sorted west to east or north to south) with skirt
+    // vertices s0, s1, facing north or east (else south or west).
+    let wall = |out: &mut Vec<u32>, g0, g1, s0, s1, north_or_east: bool| {
+        if north_or_east {
+            out.extend_from_slice(&[g0, g1, s0, g1, s1, s0]);
+        } else {
+            out.extend_from_slice(&[g0, s0, g1, g1, s0, s1]);
+        }
+    };
+    let mut skirt = mesh.vertices.len() as u32;
+    // Edges are sorted north (west to east), east (north to south), south, west.
+    for (e, edge) in edges.iter().enumerate() {
+        for k in 1..edge.len() {
+            let (g0, g1) = (edge[k - 1], edge[k]);
+            let (a, b) = (grid(g0), grid(g1));
+            let q = quadrant(a[0] + b[0], a[1] + b[1], 2);
+            let s0 = skirt + k as u32 - 1;
+            wall(&mut sections[4 + q], g0, g1, s0, s0 + 1, e < 2);
         }
         skirt += edge.len() as u32;
     }
-    idx
+    // The north-south midline: west quadrants' walls face east, east quadrants' west.
+    // The west-east one: north quadrants' walls face south, south quadrants' north.
+    for (m, line) in midlines.iter().enumerate() {
+        for k in 1..line.len() {
+            let (g0, g1) = (line[k - 1], line[k]);
+            let (a, b) = (grid(g0), grid(g1));
+            let s0 = skirt + k as u32 - 1;
+            let (first, second) = if m == 0 {
+                // North or south half of the line: quadrants 0 | 1 or 2 | 3.
+                let row = quadrant(0, a[1] + b[1], 2);
+                (row, row + 1)
+            } else {
+                let column = quadrant(a[0] + b[0], 0, 2);
+                (column, column + 2)
+            };
+            // The first (west or north) quadrant's wall faces east or south, the second's
+            // west or north.
+            wall(&mut sections[8 + first], g0, g1, s0, s0 + 1, m == 0);
+            wall(&mut sections[8 + second], g0, g1, s0, s0 + 1, m == 1);
+        }
+        skirt += line.len() as u32;
+    }
+    let mut idx = Vec::with_capacity(mesh.triangles.len() * 3 + skirt_count * 12);
+    let mut ends = [0u32; 13];
+    for (k, section) in sections.iter().enumerate() {
+        idx.extend_from_slice(section);
+        ends[k + 1] = idx.len() as u32;
+    }
+    (idx, MeshQuadrants { ends })
 }
 
 /// Grid sample (`i`, `j`) as unorm16 texture coordinates.
@@ -446,14 +605,34 @@ mod tests {
             for options in [MeshOptions::default(), MeshOptions::FULL_GRID] {
                 let (_, m) = mesh_with(key, &options);
                 let tile_up = m.centre.normalize();
-                let mut walls = 0;
+                let (mut walls, mut inner) = (0, 0);
                 for (t, tri) in m.indices.chunks_exact(3).enumerate() {
                     let (a, b, c) = (point(&m, tri[0]), point(&m, tri[1]), point(&m, tri[2]));
                     let n = (b - a).cross(c - a);
                     if n.length() < 1e-9 {
                         continue; // degenerate (pole)
                     }
-                    if t as u32 >= m.surface_triangles {
+                    let at = t as u32 * 3;
+                    if at >= m.quadrants.whole().end {
+                        // Inner walls face away from their quadrant.
+                        let q = (0..4)
+                            .find(|&q| m.quadrants.section(2, q).contains(&at))
+                            .expect("an inner wall is in a quadrant");
+                        let corners: Vec<DVec3> = m.indices
+                            [m.quadrants.section(0, q).start as usize..]
+                            [..m.quadrants.section(0, q).len()]
+                            .iter()
+                            .map(|&v| point(&m, v))
+                            .collect();
+                        let middle = corners.iter().sum::<DVec3>() / corners.len() as f64;
+                        let mid = (a + b + c) / 3.0;
+                        let out = (mid - middle) - tile_up * (mid - middle).dot(tile_up);
+                        assert!(
+                            n.dot(out) > 0.0,
+                            "{key:?}: inner skirt of {q} faces inwards"
+                        );
+                        inner += 1;
+                    } else if t as u32 >= m.surface_triangles {
                         // Walls face away from the tile centre.
                         let mid = (a + b + c) / 3.0;
                         let out = (mid - m.centre) - tile_up * (mid - m.centre).dot(tile_up);
@@ -464,6 +643,19 @@ mod tests {
                     }
                 }
                 assert!(walls >= 8, "{key:?}: {walls} skirt walls");
+                // Each quadrant has two inner edges of at least one segment, two triangles.
+                assert!(inner >= 16, "{key:?}: {inner} inner walls");
+                // Every triangle is in one quadrant's section, and the sections tile the list.
+                let mut covered = 0;
+                for section in 0..3 {
+                    for q in 0..4 {
+                        let r = m.quadrants.section(section, q);
+                        assert_eq!(r.start, covered);
+                        covered = r.end;
+                    }
+                }
+                assert_eq!(covered as usize, m.indices.len());
+                assert_eq!(m.quadrants.surface().end, m.surface_triangles * 3);
             }
             let (_, full) = mesh_with(key, &MeshOptions::FULL_GRID);
             assert_eq!(full.surface_triangles, 2 * 32 * 32);
@@ -472,6 +664,36 @@ mod tests {
             assert_eq!(full.indices.len() as u32, crate::grid::MAX_MESH_INDICES);
             assert_eq!(full.cut_error_m, 0.0);
         }
+    }
+
+    #[test]
+    fn quadrant_ranges_draw_exactly_the_parts_asked_for() {
+        let (_, m) = mesh(TileKey::new(7, 140, 40));
+        for mask in 1..=15u8 {
+            let parts = Quadrants(mask);
+            let mut got = Vec::new();
+            m.quadrants.ranges(parts, |r| got.extend(r));
+            let mut want = Vec::new();
+            if parts.is_all() {
+                want.extend(m.quadrants.whole());
+            } else {
+                for section in 0..3 {
+                    for q in (0..4).filter(|&q| parts.contains(q)) {
+                        want.extend(m.quadrants.section(section, q));
+                    }
+                }
+            }
+            assert_eq!(got, want, "{parts:?}");
+            let mut runs = 0;
+            m.quadrants.ranges(parts, |_| runs += 1);
+            assert!(runs <= 6, "{parts:?}: {runs} ranges");
+        }
+        // Opposite corners: the north-west surface, the south-east surface and the north-west
+        // edge skirts after it, the south-east edge skirts and the north-west inner ones, the
+        // south-east inner ones.
+        let mut runs = 0;
+        m.quadrants.ranges(Quadrants(0b1001), |_| runs += 1);
+        assert_eq!(runs, 4);
     }
 
     /// Every grid sample's true position against the drawn surface above or below it: the

@@ -44,6 +44,8 @@ pub struct MemoryOracle {
     pub load: LoadRule,
     /// Tiles with no data (and their descendants).
     pub no_data: Vec<TileKey>,
+    /// Tiles not loaded whatever `load` says (and their descendants).
+    pub unloaded: Vec<TileKey>,
     cache: RefCell<FxHashMap<TileKey, TileBounds>>,
 }
 
@@ -60,12 +62,16 @@ impl MemoryOracle {
             leaf_level: 22,
             load: LoadRule::All,
             no_data: Vec::new(),
+            unloaded: Vec::new(),
             cache: RefCell::new(FxHashMap::default()),
         }
     }
 
     /// Whether the rule marks `key` loaded.
     pub fn is_loaded(&self, key: TileKey) -> bool {
+        if self.unloaded.iter().any(|u| self.scheme.contains(*u, key)) {
+            return false;
+        }
         match self.load {
             LoadRule::All => true,
             LoadRule::UpToLevel(l) => key.level() <= l,

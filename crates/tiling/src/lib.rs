@@ -36,6 +36,6 @@ pub use scheme::{
 pub const GLOBE_SCHEME: TilingScheme = TilingScheme::GeographicReduced;
 
 pub use select::{
-    DrawTile, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle, TileRequest,
-    TileState, keeps_longer, morph_fraction, select, select_into,
+    DrawTile, Quadrants, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle,
+    TileRequest, TileState, keeps_longer, morph_fraction, select, select_into,
 };

@@ -1,11 +1,11 @@
 //! Selection invariants over random cameras, perspective and orthographic (property tests
 //! with an in-memory oracle).
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 
 use globus_geo::{Cartographic, Ellipsoid, View};
 use globus_test_support::{LoadRule, MemoryOracle};
-use globus_tiling::{SelectionOptions, TileKey, TileOracle, TilingScheme, select};
+use globus_tiling::{Quadrants, SelectionOptions, TileKey, TileOracle, TilingScheme, select};
 use proptest::prelude::*;
 
 #[derive(Debug, Clone)]
@@ -128,20 +128,35 @@ fn check_invariants(
     let drawn: HashSet<TileKey> = sel.draw.iter().map(|d| d.key).collect();
     prop_assert_eq!(drawn.len(), sel.draw.len(), "a tile drawn twice");
 
-    // No overlaps: no drawn tile has a drawn ancestor.
+    // No overlaps: a drawn tile's drawn ancestors are drawn in part, without the quadrant
+    // over it.
+    let parts_of: HashMap<TileKey, Quadrants> = sel.draw.iter().map(|d| (d.key, d.parts)).collect();
     for d in &sel.draw {
+        prop_assert!(!d.parts.is_empty(), "{:?} drawn with no part", d.key);
         let mut k = d.key;
         while let Some(p) = scheme.parent(k) {
-            prop_assert!(
-                !drawn.contains(&p),
-                "{:?} and its ancestor {:?} both drawn",
-                d.key,
-                p
-            );
+            if let Some(parts) = parts_of.get(&p) {
+                let q = Quadrants::of_child(scheme, p, k);
+                prop_assert!(
+                    q.is_some_and(|q| q.0 & parts.0 == 0),
+                    "{:?} and its ancestor {:?} both drawn ({:?} of it)",
+                    d.key,
+                    p,
+                    parts
+                );
+            }
             k = p;
         }
         // Only loaded data is drawn: ancestors stand in for loading children.
         prop_assert!(oracle.is_loaded(d.key), "{:?} drawn but not loaded", d.key);
+        // A tile drawn in part has a loaded child drawn (or refined) over the rest.
+        if !d.parts.is_all() {
+            prop_assert!(
+                scheme.children(d.key).iter().any(|&c| oracle.is_loaded(c)),
+                "{:?} drawn in part with no loaded child",
+                d.key
+            );
+        }
     }
 
     // Exact coverage of the visible surface.
@@ -154,7 +169,16 @@ fn check_invariants(
             let covering = sel
                 .draw
                 .iter()
-                .filter(|d| scheme.tile_at(lon, lat, d.key.level()) == Some(d.key))
+                .filter(|d| {
+                    // The part of the tile over the point: its child's quadrants there
+                    // (Web Mercator's halve in y, not in latitude).
+                    let over = || {
+                        let child = scheme.tile_at(lon, lat, d.key.level() + 1)?;
+                        Quadrants::of_child(scheme, d.key, child)
+                    };
+                    scheme.tile_at(lon, lat, d.key.level()) == Some(d.key)
+                        && (d.parts.is_all() || over().is_some_and(|q| q.0 & d.parts.0 != 0))
+                })
                 .count();
             prop_assert_eq!(
                 covering,
@@ -230,9 +254,12 @@ fn check_invariants(
     for r in &sel.requests {
         prop_assert!(!oracle.is_loaded(r.key));
         if let Some(p) = scheme.parent(r.key) {
+            // Drawn over the requested tile's area.
+            let over = parts_of.get(&p).copied().unwrap_or_default();
+            let q = Quadrants::of_child(scheme, p, r.key).unwrap_or_default();
             prop_assert!(
-                drawn.contains(&p),
-                "{:?} requested but parent not drawn",
+                !q.is_empty() && q.0 & over.0 == q.0,
+                "{:?} requested but parent not drawn over it",
                 r.key
             );
         }
@@ -345,6 +372,62 @@ fn no_data_stops_refinement_and_keeps_the_ancestor() {
         "the ancestor covers the no-data area"
     );
     assert!(sel.requests.is_empty());
+}
+
+#[test]
+fn a_loading_child_leaves_only_its_quadrant_to_its_parent() {
+    // Straight down on the Alps from 30 km, everything loaded but one child of the level-8
+    // tile under the eye (and its descendants): that tile is drawn over its missing child's
+    // quadrant only, the child is requested, and the rest of the view keeps its detail.
+    let scheme = TilingScheme::Geographic;
+    let cam = Camera {
+        lon: 7.6,
+        lat: 46.0,
+        alt: 30_000.0,
+        heading: 0.0,
+        pitch: -90.0,
+        width: 640,
+        height: 480,
+        ortho_m: None,
+    };
+    let view = view_of(&cam);
+    let mut o = oracle(scheme, LoadRule::All);
+    o.error_variation = 0.0;
+    let full = select(&view, &o, &SelectionOptions::default());
+    let parent = scheme
+        .tile_at(7.6f64.to_radians(), 46f64.to_radians(), 8)
+        .expect("valid");
+    let children = scheme.children(parent);
+    let missing = children.as_slice()[3];
+    o.unloaded = vec![missing];
+    let sel = select(&view, &o, &SelectionOptions::default());
+    let drawn = sel
+        .draw
+        .iter()
+        .find(|d| d.key == parent)
+        .expect("the parent stands in for its missing child");
+    assert_eq!(
+        Some(drawn.parts),
+        Quadrants::of_child(scheme, parent, missing)
+    );
+    assert_eq!(drawn.parts.count(), 1);
+    assert!(sel.requests.iter().any(|r| r.key == missing));
+    // The loaded siblings are refined as deep as with everything loaded.
+    for &sibling in &children.as_slice()[..3] {
+        let deepest = |s: &globus_tiling::Selection| {
+            s.draw
+                .iter()
+                .filter(|d| scheme.contains(sibling, d.key))
+                .map(|d| d.key.level())
+                .max()
+        };
+        assert_eq!(deepest(&sel), deepest(&full), "under {sibling:?}");
+    }
+    // With no child loaded, the parent is drawn whole (one range of its mesh).
+    o.unloaded = children.as_slice().to_vec();
+    let sel = select(&view, &o, &SelectionOptions::default());
+    let drawn = sel.draw.iter().find(|d| d.key == parent).expect("drawn");
+    assert!(drawn.parts.is_all());
 }
 
 #[test]

@@ -195,6 +195,7 @@ mod tests {
             sse_px: 1.0,
             distance_m: 1.0,
             morph: 1.0,
+            parts: globus_tiling::Quadrants::ALL,
         };
         let a = TileKey::new(5, 10, 7);
         let b = TileKey::new(5, 11, 7);

@@ -746,7 +746,11 @@ pub(crate) fn surface(mesh: &TileMesh, rect_deg: [f64; 4], morph: &[MorphVertex]
     // Skirt walls are pairs of triangles over two edge vertices and the two skirt vertices
     // under them (same uv).
     let is_top = |i: u32| (i as usize) < surface_vertices;
-    let skirts = mesh.indices[(surface_count * 3).min(mesh.indices.len())..]
+    let edge_skirts = mesh.quadrants.edge_skirts();
+    let skirts = mesh
+        .indices
+        .get(edge_skirts.start as usize..edge_skirts.end as usize)
+        .unwrap_or_default()
         .chunks_exact(6)
         .filter_map(|q| {
             let mut top: Vec<u32> = q.iter().copied().filter(|&i| is_top(i)).collect();
