@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use common::camera;
 use globus_engine::{
-    CameraSpec, Ellipsoid, GlobeBuilder, Headless, RenderedFrame, RgbaImage, View, holes_inside,
-    save_png,
+    CameraSpec, Ellipsoid, GlobeBuilder, Headless, RenderedFrame, RgbaImage, TileKey, View,
+    holes_inside, save_png,
 };
 
 const TIMEOUT: Duration = Duration::from_secs(240);
@@ -278,6 +278,121 @@ fn mixed_level_adaptive_meshes_leave_no_cracks() {
             "{name}: {holes} background pixels inside the planet's silhouette"
         );
     }
+}
+
+/// The default planet with some tiles failing for good: at odd levels 9 to 13, one tile in
+/// three (by key). Their parents are drawn over just the failed children's quadrants.
+struct FailingTiles(std::sync::Arc<dyn globus_engine::TerrainSource>);
+
+impl FailingTiles {
+    fn fails(key: TileKey) -> bool {
+        let level = key.level();
+        (9..=13).contains(&level) && level % 2 == 1 && (key.x() + 2 * key.y()).is_multiple_of(3)
+    }
+}
+
+impl globus_stream::TileSource for FailingTiles {
+    type Tile = globus_stream::TerrainData;
+    fn name(&self) -> &str {
+        "failing tiles"
+    }
+    fn scheme(&self) -> globus_tiling::TilingScheme {
+        self.0.scheme()
+    }
+    fn load(
+        &self,
+        key: TileKey,
+        cancel: &globus_stream::fetch::Cancel,
+    ) -> Result<Option<Self::Tile>, globus_stream::SourceError> {
+        if Self::fails(key) {
+            return Err(globus_stream::SourceError::Failed {
+                key,
+                source_name: self.name().into(),
+                message: "held back by the test".into(),
+            });
+        }
+        self.0.load(key, cancel)
+    }
+    fn byte_size(&self, tile: &Self::Tile) -> usize {
+        self.0.byte_size(tile)
+    }
+}
+
+impl globus_engine::TerrainSource for FailingTiles {
+    fn ellipsoid(&self) -> &Ellipsoid {
+        self.0.ellipsoid()
+    }
+    fn occluder(&self) -> &Ellipsoid {
+        self.0.occluder()
+    }
+    fn height_range_m(&self) -> (f64, f64) {
+        self.0.height_range_m()
+    }
+    fn max_level(&self) -> u8 {
+        self.0.max_level()
+    }
+    fn height_at(&self, lon_rad: f64, lat_rad: f64) -> Option<f64> {
+        self.0.height_at(lon_rad, lat_rad)
+    }
+}
+
+/// Where some children cannot load, their parents are drawn over just those quadrants
+/// beside the loaded siblings: the ground stays closed (the midline walls under a parent's
+/// quadrants cover the step to a finer sibling) and looks like the ground with everything
+/// loaded.
+#[test]
+fn parents_drawn_in_part_beside_loaded_children_leave_no_cracks() {
+    let e = Ellipsoid::WGS84;
+    let cam = camera(7.6, 46.0, 2_500.0, 200.0, -12.0, true);
+    let (w, h) = (640, 360);
+    let (whole, _) = render("in_part_reference", cam, w, h);
+    let mut builder = GlobeBuilder::new();
+    let planet = builder.open_source().expect("the procedural planet");
+    builder.source(std::sync::Arc::new(FailingTiles(planet)));
+    let (frame, view) = render_with(&builder, "in_part", cam, w, h);
+    let sel = &frame.report.selection;
+    assert!(
+        sel.drawn_in_part >= 5,
+        "{} tiles drawn in part of {}",
+        sel.drawn_in_part,
+        sel.selected
+    );
+    let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-3_000.0));
+    assert!(
+        inside > 10_000,
+        "the planet fills the lower part of the view"
+    );
+    assert_eq!(
+        holes, 0,
+        "{holes} background pixels inside the planet's silhouette"
+    );
+    // The parents' coarser surface stands in for the failed children: the same ground,
+    // a little smoother.
+    let (mut sum, mut far) = (0.0, 0u32);
+    let n = (w * h) as usize;
+    for (a, b) in whole
+        .image
+        .pixels
+        .chunks_exact(4)
+        .zip(frame.image.pixels.chunks_exact(4))
+    {
+        let d: u32 = (0..3).map(|c| u32::from(a[c].abs_diff(b[c]))).sum();
+        sum += f64::from(d);
+        far += u32::from(d > 96);
+    }
+    let mean = sum / n as f64;
+    println!(
+        "{} of {} tiles drawn in part; mean difference {mean:.2}, {far} pixels far off",
+        sel.drawn_in_part, sel.selected
+    );
+    assert!(
+        mean < 16.0,
+        "mean difference {mean:.2} from the loaded ground"
+    );
+    assert!(
+        f64::from(far) < 0.04 * n as f64,
+        "{far} pixels far from the loaded ground"
+    );
 }
 
 #[test]

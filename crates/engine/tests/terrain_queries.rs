@@ -46,7 +46,7 @@ impl Hgt {
 /// resolution), no procedural refinement below it, loaded for a view straight down from
 /// 8 km over (11.95 E, 57.7 N).
 fn srtm_globe(exaggeration: f64) -> Headless {
-    let mut builder = common::srtm_builder("terrain_queries", &format!("srtm_x{exaggeration}"));
+    let mut builder = common::srtm_builder("terrain_queries");
     builder.exaggeration(exaggeration);
     let mut off = Headless::new(&builder, 320, 240).expect("a GPU or lavapipe, and the pyramid");
     let cam = CameraSpec {

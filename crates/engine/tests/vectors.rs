@@ -78,7 +78,7 @@ fn with_and_without(
 
 #[test]
 fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
-    let builder = common::srtm_builder("vectors", "srtm");
+    let builder = common::srtm_builder("vectors");
     let (w, h) = (480u32, 360u32);
     let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the pyramid");
     let dir = common::scratch("vectors", "line");

@@ -26,8 +26,14 @@
 //! given its vertices' morph heights ([`DrapeSurface::with_lifts`]) interpolates them with
 //! the positions, so every draped point carries the lift of the terrain under it
 //! ([`SurfacePoint::lift_m`]) and the renderer lifts it with the terrain.
+//!
+//! Quadrants: every draped piece lies on one mesh triangle, and carries the quadrant of the
+//! tile that triangle is in ([`globus_tiling::Quadrants::index_of`] of its centre). Terrain
+//! meshes keep each quadrant's triangles apart, so a renderer drawing a tile over only some
+//! of its quadrants (beside finer children) draws just those quadrants' pieces.
 
 use globus_geo::DVec3;
+use globus_tiling::Quadrants;
 
 /// Buckets per side of the triangle index over a tile.
 const CELLS: usize = 16;
@@ -40,6 +46,8 @@ pub struct DrapeSurface {
     uv: Vec<[f64; 2]>,
     positions: Vec<DVec3>,
     triangles: Vec<[u32; 3]>,
+    /// The quadrant of each triangle (of its centre), 0 to 3.
+    quadrants: Vec<u8>,
     cells: Vec<Vec<u32>>,
     /// Skirt walls under the tile's edges: top vertices (on the edge) and the skirt vertices
     /// under them.
@@ -81,6 +89,17 @@ pub struct DrapedSegment {
     pub along: [f64; 2],
     /// The morph heights at the start and end ([`SurfacePoint::lift_m`]).
     pub lift_m: [f64; 2],
+    /// The tile's quadrant it lies in, 0 to 3 ([`Quadrants::index_of`]).
+    pub quadrant: u8,
+}
+
+/// A piece of a draped triangle: a triangle on one of the surface's triangles or skirt walls.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrapedTriangle {
+    /// The corners, relative to the tile's origin.
+    pub at: [SurfacePoint; 3],
+    /// The tile's quadrant it lies in, 0 to 3 ([`Quadrants::index_of`]).
+    pub quadrant: u8,
 }
 
 impl DrapeSurface {
@@ -109,11 +128,19 @@ impl DrapeSurface {
                 }
             }
         }
+        let quadrants = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| uv[i as usize]);
+                quadrant_at([(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0])
+            })
+            .collect();
         Self {
             rect_deg,
             uv,
             positions,
             triangles,
+            quadrants,
             cells,
             skirts: Vec::new(),
             lifts: Vec::new(),
@@ -228,6 +255,7 @@ impl DrapeSurface {
                     b: b.at,
                     along,
                     lift_m: [a.lift_m, b.lift_m],
+                    quadrant: self.quadrants[k as usize],
                 });
             }
         }
@@ -235,7 +263,7 @@ impl DrapeSurface {
 
     /// Drapes a triangle (longitude, latitude in degrees, shifted by `shift`): appends the
     /// 3D triangles covering its part of the surface, relative to the tile's origin.
-    pub fn drape_triangle(&self, tri: [[f64; 2]; 3], shift: f64, out: &mut Vec<[SurfacePoint; 3]>) {
+    pub fn drape_triangle(&self, tri: [[f64; 2]; 3], shift: f64, out: &mut Vec<DrapedTriangle>) {
         let t = tri.map(|p| self.to_uv(p[0] + shift, p[1]));
         let [lo, hi] = bbox(t);
         if hi[0] < 0.0 || hi[1] < 0.0 || lo[0] > 1.0 || lo[1] > 1.0 {
@@ -269,8 +297,12 @@ impl DrapeSurface {
                     if mhi[0] < lo[0] || mhi[1] < lo[1] || mlo[0] > hi[0] || mlo[1] > hi[1] {
                         continue;
                     }
+                    let quadrant = self.quadrants[k as usize];
                     if mesh.iter().all(|&p| inside(p)) {
-                        out.push(idx.map(|v| self.vertex(v)));
+                        out.push(DrapedTriangle {
+                            at: idx.map(|v| self.vertex(v)),
+                            quadrant,
+                        });
                         continue;
                     }
                     poly.clear();
@@ -287,7 +319,10 @@ impl DrapeSurface {
                     }
                     let p: Vec<SurfacePoint> = poly.iter().map(|&q| self.point_in(k, q)).collect();
                     for m in 1..p.len() - 1 {
-                        out.push([p[0], p[m], p[m + 1]]);
+                        out.push(DrapedTriangle {
+                            at: [p[0], p[m], p[m + 1]],
+                            quadrant,
+                        });
                     }
                 }
             }
@@ -300,7 +335,7 @@ impl DrapeSurface {
         t: [[f64; 2]; 3],
         lo: [f64; 2],
         hi: [f64; 2],
-        out: &mut Vec<[SurfacePoint; 3]>,
+        out: &mut Vec<DrapedTriangle>,
     ) {
         for &[a, b, sa, sb] in &self.skirts {
             let (ua, ub) = (self.uv[a as usize], self.uv[b as usize]);
@@ -314,8 +349,17 @@ impl DrapeSurface {
             let p = |i: u32| self.vertex(i);
             let (top0, top1) = (p(a).lerp(p(b), t0), p(a).lerp(p(b), t1));
             let (bot0, bot1) = (p(sa).lerp(p(sb), t0), p(sa).lerp(p(sb), t1));
-            out.push([top0, top1, bot0]);
-            out.push([top1, bot1, bot0]);
+            let mid = (t0 + t1) / 2.0;
+            let quadrant =
+                quadrant_at([ua[0] + (ub[0] - ua[0]) * mid, ua[1] + (ub[1] - ua[1]) * mid]);
+            out.push(DrapedTriangle {
+                at: [top0, top1, bot0],
+                quadrant,
+            });
+            out.push(DrapedTriangle {
+                at: [top1, bot1, bot0],
+                quadrant,
+            });
         }
     }
 
@@ -336,6 +380,12 @@ impl DrapeSurface {
         })
     }
 
+    /// The tile's quadrant (0 to 3, [`Quadrants::index_of`]) over (longitude, latitude) in
+    /// degrees shifted by `shift`.
+    pub fn quadrant(&self, lon: f64, lat: f64, shift: f64) -> u8 {
+        quadrant_at(self.to_uv(lon + shift, lat))
+    }
+
     /// The 3D point at `q` (u, v) in triangle `k`'s plane, and its lift.
     fn point_in(&self, k: u32, q: [f64; 2]) -> SurfacePoint {
         let idx = self.triangles[k as usize];
@@ -353,6 +403,11 @@ impl DrapeSurface {
             lift_m: pa.lift_m * wa + pb.lift_m * wb + pc.lift_m * wc,
         }
     }
+}
+
+/// The quadrant holding (u, v).
+fn quadrant_at([u, v]: [f64; 2]) -> u8 {
+    Quadrants::index_of(u, v) as u8
 }
 
 fn cross(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
@@ -546,7 +601,7 @@ mod tests {
         let area: f64 = out
             .iter()
             .map(|t| {
-                let [a, b, c] = t.map(|p| [p.at.x, p.at.y]);
+                let [a, b, c] = t.at.map(|p| [p.at.x, p.at.y]);
                 cross(a, b, c).abs() / 2.0
             })
             .sum();
@@ -557,7 +612,7 @@ mod tests {
             "{area} vs {expected}"
         );
         for t in &out {
-            let c = (t[0].at + t[1].at + t[2].at) / 3.0;
+            let c = (t.at[0].at + t.at[1].at + t.at[2].at) / 3.0;
             assert!((c.z - mesh_height(&s, c.x / 1000.0, c.y / 1000.0)).abs() < 1e-9);
         }
         // A triangle covering the tile gives back the whole mesh.
@@ -583,7 +638,11 @@ mod tests {
         let (mut out, mut without) = (Vec::new(), Vec::new());
         s.drape_triangle(fill, 0.0, &mut out);
         plain.drape_triangle(fill, 0.0, &mut without);
-        let walls: Vec<&[SurfacePoint; 3]> = out.iter().filter(|t| !without.contains(t)).collect();
+        let walls: Vec<[SurfacePoint; 3]> = out
+            .iter()
+            .filter(|t| !without.contains(t))
+            .map(|t| t.at)
+            .collect();
         assert_eq!(walls.len(), 2, "{walls:?}");
         let area: f64 = walls
             .iter()
@@ -591,6 +650,40 @@ mod tests {
             .sum();
         // 125 m of edge (of 250) by 100 m.
         assert!((area - 125.0 * 100.0).abs() < 1.0, "{area}");
+    }
+
+    /// Pieces say which quarter of the tile they lie in (the grid's triangles keep to their
+    /// quarters, as terrain meshes do), so a tile drawn over some quarters draws just theirs.
+    #[test]
+    fn draped_pieces_know_their_quadrant() {
+        let (s, _) = surface();
+        // (u, v) of a point of the test surface is its x, y over 1000.
+        let of = |p: DVec3| Quadrants::index_of(p.x / 1000.0, p.y / 1000.0) as u8;
+        let mut segs = Vec::new();
+        s.drape_line(
+            &[[9.8, 50.1], [11.3, 50.9], [10.2, 50.3], [10.2, 50.9]],
+            0.0,
+            &mut segs,
+        );
+        let mut seen = [false; 4];
+        for seg in &segs {
+            assert_eq!(seg.quadrant, of((seg.a + seg.b) / 2.0), "{seg:?}");
+            seen[usize::from(seg.quadrant)] = true;
+        }
+        assert_eq!(seen, [true; 4]);
+        let mut tris = Vec::new();
+        s.drape_triangle([[0.0, 40.0], [40.0, 40.0], [0.0, 80.0]], 0.0, &mut tris);
+        let mut per_quadrant = [0; 4];
+        for t in &tris {
+            let centre = (t.at[0].at + t.at[1].at + t.at[2].at) / 3.0;
+            assert_eq!(t.quadrant, of(centre), "{t:?}");
+            per_quadrant[usize::from(t.quadrant)] += 1;
+        }
+        assert_eq!(per_quadrant, [8; 4]);
+        assert_eq!(s.quadrant(10.2, 50.9, 0.0), 0);
+        assert_eq!(s.quadrant(10.7, 50.9, 0.0), 1);
+        assert_eq!(s.quadrant(370.2, 50.1, -360.0), 2);
+        assert_eq!(s.quadrant(10.7, 50.1, 0.0), 3);
     }
 
     #[test]
@@ -628,7 +721,7 @@ mod tests {
         let mut tris = Vec::new();
         s.drape_triangle([[10.1, 50.1], [10.9, 50.2], [10.4, 50.8]], 0.0, &mut tris);
         assert!(!tris.is_empty());
-        tris.iter().flatten().copied().for_each(check);
+        tris.iter().flat_map(|t| t.at).for_each(check);
         let mut segs = Vec::new();
         s.drape_line(&[[9.8, 50.1], [11.3, 50.9]], 0.0, &mut segs);
         for seg in &segs {

@@ -23,7 +23,7 @@ pub mod shape;
 pub mod simplify;
 pub mod style;
 
-pub use drape::{DrapeSurface, DrapedSegment, SurfacePoint};
+pub use drape::{DrapeSurface, DrapedSegment, DrapedTriangle, SurfacePoint};
 pub use feature::{Feature, from_geojson};
 pub use load::{FeatureWarning, Loaded, load_file};
 pub use read::{Flow, MAX_FEATURE_BYTES, ReadError, ReadSummary, read, read_file};

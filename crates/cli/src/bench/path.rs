@@ -166,6 +166,12 @@ pub fn run(
         }
         last_rise = Some(rise);
     }
+    // Frames that fell back to coarse tiles: fewer than half the tiles of the frame before
+    // (a turning camera whose new children are still loading, an evicted ancestor).
+    let collapses = samples
+        .windows(2)
+        .filter(|w| 2 * w[1].tiles_rendered < w[0].tiles_rendered)
+        .count();
     let globe = off.globe();
     let st = globe.layer().scheduler_stats();
     let cs = globe.layer().colour_scheduler_stats();
@@ -185,6 +191,7 @@ pub fn run(
         "select_us": column(|s| s.select_us),
         "frame_ms": column(|s| s.frame_ms),
         "tiles_rendered": column(|s| f64::from(s.tiles_rendered)),
+        "tiles_rendered_collapses": collapses,
         "nodes_visited": column(|s| f64::from(s.nodes_visited)),
         "draw_calls": column(|s| f64::from(s.draw_calls)),
         "triangles": column(|s| s.triangles as f64),

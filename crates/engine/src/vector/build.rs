@@ -818,12 +818,28 @@ struct LineScratch {
 }
 
 /// Instances one tile draws for the draped geometry of `features` (id, draped part), at
-/// anchor 0 (the caller sets the tile's anchor).
+/// anchor 0 (the caller sets the tile's anchor), kept apart by the quadrant of the tile they
+/// lie in (bit order of [`globus_tiling::Quadrants`]): a tile drawn over only some of its
+/// quadrants, beside finer children, draws only those quadrants' pieces, so a line is not
+/// drawn twice, on the parent and on the child.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct TileDrape {
+    pub quadrants: [QuadrantDrape; 4],
+}
+
+/// The draped instances of one quadrant of a tile.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct QuadrantDrape {
     pub lines: Vec<LineInstance>,
     pub fills: Vec<FillVertex>,
     pub points: Vec<LineInstance>,
+}
+
+impl QuadrantDrape {
+    /// Its line instances, then its points'.
+    pub(crate) fn line_instances(&self) -> impl Iterator<Item = &LineInstance> {
+        self.lines.iter().chain(&self.points)
+    }
 }
 
 impl TileDrape {
@@ -871,9 +887,9 @@ impl TileDrape {
                     tris.clear();
                     surface.drape_triangle(*t, shift, &mut tris);
                     for tri in &tris {
-                        for &p in tri {
-                            self.fills
-                                .push(FillVertex::new(p.at, 0, colour, id, true).lifted(p.lift_m));
+                        let fills = &mut self.quadrants[usize::from(tri.quadrant)].fills;
+                        for &p in &tri.at {
+                            fills.push(FillVertex::new(p.at, 0, colour, id, true).lifted(p.lift_m));
                         }
                     }
                 }
@@ -883,7 +899,8 @@ impl TileDrape {
             let [lon, lat] = p.at;
             for shift in surface.shifts(lon, lon) {
                 if let Some(at) = surface.point(lon, lat, shift) {
-                    self.points.push(
+                    let q = usize::from(surface.quadrant(lon, lat, shift));
+                    self.quadrants[q].points.push(
                         LineInstance::point(
                             at.at,
                             id,
@@ -935,8 +952,11 @@ impl TileDrape {
             !l.closed && kept[kept.len() - 1] == last_vertex,
         );
         let last = (kept.len() - 1) as f64;
-        // Runs of pieces that meet end to end.
-        for piece in segs.chunk_by(|x: &DrapedSegment, y| x.along[1] == y.along[0]) {
+        // Runs of pieces that meet end to end within one quadrant (where a line crosses a
+        // midline its run breaks, drawn round there as at a tile's edge).
+        for piece in segs
+            .chunk_by(|x: &DrapedSegment, y| x.along[1] == y.along[0] && x.quadrant == y.quadrant)
+        {
             run.clear();
             lifts.clear();
             metres.clear();
@@ -950,25 +970,35 @@ impl TileDrape {
                 starts && piece[0].along[0] == 0.0,
                 ends && piece[piece.len() - 1].along[1] == last,
             );
-            push_run(&mut self.lines, run, metres, lifts, id, &l.look, caps);
+            let lines = &mut self.quadrants[usize::from(piece[0].quadrant)].lines;
+            push_run(lines, run, metres, lifts, id, &l.look, caps);
         }
     }
 
     /// Drops the pieces of the features with these pick ids.
     pub(crate) fn retain_not(&mut self, picks: &[u32]) {
-        self.lines.retain(|l| !picks.contains(&l.id));
-        self.points.retain(|l| !picks.contains(&l.id));
-        self.fills.retain(|f| !picks.contains(&f.id));
+        for q in &mut self.quadrants {
+            q.lines.retain(|l| !picks.contains(&l.id));
+            q.points.retain(|l| !picks.contains(&l.id));
+            q.fills.retain(|f| !picks.contains(&f.id));
+        }
     }
 
     pub(crate) fn is_empty(&self) -> bool {
-        self.lines.is_empty() && self.fills.is_empty() && self.points.is_empty()
+        self.quadrants
+            .iter()
+            .all(|q| q.lines.is_empty() && q.fills.is_empty() && q.points.is_empty())
     }
 
     /// Bytes of its instances.
     pub(crate) fn bytes(&self) -> usize {
-        (self.lines.len() + self.points.len()) * std::mem::size_of::<LineInstance>()
-            + self.fills.len() * std::mem::size_of::<FillVertex>()
+        self.quadrants
+            .iter()
+            .map(|q| {
+                (q.lines.len() + q.points.len()) * std::mem::size_of::<LineInstance>()
+                    + q.fills.len() * std::mem::size_of::<FillVertex>()
+            })
+            .sum()
     }
 }
 

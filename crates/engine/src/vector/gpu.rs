@@ -7,7 +7,9 @@
 //! indexes by `vertex_index / 6`, so ranges need no first-instance feature) and a range of
 //! the fill vertex buffer, sub-allocated first fit, plus an anchor slot. An entry is
 //! uploaded once; a frame whose entries changed rewrites only the two indirect argument
-//! lists (one record per drawn entry) and uploads the new entries; every frame writes the
+//! lists (one record per drawn entry, or per run of its drawn quadrants: a tile's draped
+//! pieces are stored quadrant by quadrant, and a tile drawn in part beside finer children
+//! draws only its drawn quadrants' pieces) and uploads the new entries; every frame writes the
 //! anchors' offsets from the eye. Everything is drawn with two `multi_draw_indirect` calls.
 //! Buffers grow by doubling, copied on the GPU, so ranges stay valid, up to the device's
 //! limits (a storage buffer no larger than one binding may see) and the layer's GPU budget:
@@ -20,7 +22,7 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use globus_geo::DVec3;
 use globus_render::RangeAllocator;
-use globus_tiling::TileKey;
+use globus_tiling::{Quadrants, TileKey};
 use globus_vector::{LineCap, LineJoin, Rgba};
 use rustc_hash::FxHashMap;
 
@@ -288,6 +290,51 @@ struct Resident {
     slot: u32,
     lines: Range<u32>,
     fills: Range<u32>,
+    /// Where each quadrant's line instances and fill vertices end, counted from the start
+    /// of the entry's ranges ([`QuadrantEnds`]).
+    ends: QuadrantEnds,
+}
+
+/// Where each of an entry's four quadrants ends in its line instances and in its fill
+/// vertices (quadrant `q` spans from the end of `q - 1`, or 0, to the end of `q`): an entry
+/// whose pieces are not split by quadrant (a chunk at altitude) ends every quadrant at its
+/// last piece.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct QuadrantEnds {
+    pub lines: [u32; 4],
+    pub fills: [u32; 4],
+}
+
+impl QuadrantEnds {
+    /// All pieces in one block.
+    pub(crate) fn whole(lines: usize, fills: usize) -> Self {
+        Self {
+            lines: [lines as u32; 4],
+            fills: [fills as u32; 4],
+        }
+    }
+
+    /// The ranges (relative to the entry's start) that draw `parts`, with neighbouring
+    /// quadrants merged: at most two per kind; empty ones left out.
+    fn ranges(ends: &[u32; 4], parts: Quadrants, mut f: impl FnMut(Range<u32>)) {
+        let mut open: Option<Range<u32>> = None;
+        for q in 0..4 {
+            let start = if q == 0 { 0 } else { ends[q - 1] };
+            if !parts.contains(q) {
+                if let Some(r) = open.take().filter(|r| !r.is_empty()) {
+                    f(r);
+                }
+                continue;
+            }
+            open = Some(match open {
+                Some(r) => r.start..ends[q],
+                None => start..ends[q],
+            });
+        }
+        if let Some(r) = open.filter(|r| !r.is_empty()) {
+            f(r);
+        }
+    }
 }
 
 /// The layout `multi_draw_indirect` reads.
@@ -542,6 +589,7 @@ impl Gpu {
         origin: DVec3,
         lines: &[LineInstance],
         fills: &[FillVertex],
+        ends: QuadrantEnds,
     ) -> bool {
         self.remove(key);
         let (device, queue) = (frame.device(), frame.queue());
@@ -606,6 +654,7 @@ impl Gpu {
                 slot,
                 lines: line_range,
                 fills: fill_range,
+                ends,
             },
         );
         true
@@ -633,33 +682,34 @@ impl Gpu {
         self.entries.keys().copied()
     }
 
-    /// Sets what is drawn: the indirect records of `drawn` (entries on the GPU).
-    pub(crate) fn set_drawn(&mut self, frame: &FrameContext<'_>, drawn: &[EntryKey]) {
+    /// Sets what is drawn: the indirect records of `drawn` (entries on the GPU, each with
+    /// the quadrants it draws).
+    pub(crate) fn set_drawn(&mut self, frame: &FrameContext<'_>, drawn: &[(EntryKey, Quadrants)]) {
         let (device, queue) = (frame.device(), frame.queue());
         self.drawn.clear();
         let mut line_args = Vec::new();
         let mut fill_args = Vec::new();
         let mut oit_args = Vec::new();
         let (mut lines, mut fills) = (0u32, 0u32);
-        for key in drawn {
-            let Some(r) = self.entries.get(key) else {
+        for &(key, parts) in drawn {
+            let Some(r) = self.entries.get(&key) else {
                 continue;
             };
-            self.drawn.push(*key);
-            if !r.lines.is_empty() {
+            self.drawn.push(key);
+            QuadrantEnds::ranges(&r.ends.lines, parts, |q| {
                 line_args.push(DrawArgs {
-                    vertex_count: r.lines.len() as u32 * 6,
+                    vertex_count: q.len() as u32 * 6,
                     instance_count: 1,
-                    first_vertex: r.lines.start * 6,
+                    first_vertex: (r.lines.start + q.start) * 6,
                     first_instance: 0,
                 });
-                lines += r.lines.len() as u32;
-            }
-            if !r.fills.is_empty() {
+                lines += q.len() as u32;
+            });
+            QuadrantEnds::ranges(&r.ends.fills, parts, |q| {
                 let args = DrawArgs {
-                    vertex_count: r.fills.len() as u32,
+                    vertex_count: q.len() as u32,
                     instance_count: 1,
-                    first_vertex: r.fills.start,
+                    first_vertex: r.fills.start + q.start,
                     first_instance: 0,
                 };
                 // Geometry at altitude (volumes, fills in the air) is translucent over
@@ -668,8 +718,8 @@ impl Gpu {
                     EntryKey::Tile(_) => fill_args.push(args),
                     EntryKey::Chunk(..) => oit_args.push(args),
                 }
-                fills += r.fills.len() as u32;
-            }
+                fills += q.len() as u32;
+            });
         }
         self.line_draws
             .write(device, queue, bytemuck::cast_slice(&line_args));
@@ -1175,5 +1225,53 @@ fn allocate(ranges: &mut RangeAllocator, len: u32, limit: u32) -> Option<Range<u
             return None;
         }
         ranges.grow(grown);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The (start, end) of the ranges drawing quadrants `bits`.
+    fn ranges(ends: [u32; 4], bits: u8) -> Vec<(u32, u32)> {
+        let mut out = Vec::new();
+        QuadrantEnds::ranges(&ends, Quadrants(bits), |r| out.push((r.start, r.end)));
+        out
+    }
+
+    /// A tile drawn in part draws exactly its drawn quadrants' pieces, in as few records as
+    /// their order allows.
+    #[test]
+    fn quadrant_ranges_draw_the_drawn_quadrants_pieces() {
+        // Quadrants of 2, 3, 0 and 4 pieces.
+        let ends = [2, 5, 5, 9];
+        assert_eq!(ranges(ends, 0b1111), [(0, 9)]);
+        assert_eq!(ranges(ends, 0b0011), [(0, 5)]);
+        assert_eq!(ranges(ends, 0b1001), [(0, 2), (5, 9)]);
+        assert_eq!(ranges(ends, 0b0100), []);
+        assert_eq!(ranges(ends, 0b0110), [(2, 5)]);
+        assert_eq!(ranges(ends, 0b1010), [(2, 5), (5, 9)]);
+        assert_eq!(ranges(ends, 0), []);
+        // Every set draws each drawn quadrant's pieces once and nothing else.
+        for bits in 0..16u8 {
+            let mut drawn = [false; 9];
+            for (start, end) in ranges(ends, bits) {
+                for i in start..end {
+                    assert!(!drawn[i as usize], "{bits:04b}: piece {i} twice");
+                    drawn[i as usize] = true;
+                }
+            }
+            for (i, d) in drawn.iter().enumerate() {
+                let q = ends
+                    .iter()
+                    .position(|&e| i < e as usize)
+                    .expect("in a quadrant");
+                assert_eq!(*d, Quadrants(bits).contains(q), "{bits:04b}: piece {i}");
+            }
+        }
+        // An entry not split by quadrant draws whole.
+        let whole = QuadrantEnds::whole(7, 3);
+        assert_eq!(ranges(whole.lines, 0b1111), [(0, 7)]);
+        assert_eq!(ranges(whole.fills, 0b1111), [(0, 3)]);
     }
 }

@@ -31,13 +31,13 @@ use std::path::Path;
 use std::time::Instant;
 
 use globus_geo::{DVec3, Ellipsoid};
-use globus_tiling::TileKey;
+use globus_tiling::{Quadrants, TileKey};
 use globus_vector::{Feature, Loaded, ReadError, StyleRules};
 use rustc_hash::FxHashMap;
 
 use crate::overlay::{FrameContext, Overlay, OverlayPass};
 use build::{Bbox, Built, TileDrape};
-use gpu::{EntryKey, Gpu};
+use gpu::{EntryKey, Gpu, QuadrantEnds};
 use labels::PointLabels;
 
 pub use gpu::SHADER;
@@ -474,32 +474,41 @@ impl VectorLayer {
             gpu.remove(key);
         }
         // What this frame draws: the drawn tiles with pieces, then every chunk at altitude.
+        // (A tile drawn in part draws its drawn quadrants' pieces.)
         let mut wanted = Vec::new();
         for d in frame.drawn_tiles() {
             if self.tiles.get(&d.key).is_some_and(|t| !t.drape.is_empty()) {
-                wanted.push(EntryKey::Tile(d.key));
+                wanted.push((EntryKey::Tile(d.key), d.parts));
             }
         }
         let mut ids: Vec<u32> = self.entries.keys().copied().collect();
         ids.sort_unstable();
         for id in ids {
             if let Some(b) = self.entries.get(&id).and_then(|e| e.built.as_ref()) {
-                wanted.extend((0..b.chunks.len() as u32).map(|i| EntryKey::Chunk(id, i)));
+                wanted.extend(
+                    (0..b.chunks.len() as u32).map(|i| (EntryKey::Chunk(id, i), Quadrants::ALL)),
+                );
             }
         }
         let mut drawn = Vec::with_capacity(wanted.len());
         let (mut made_room, mut left_out) = (false, 0u32);
-        for &key in &wanted {
+        for &(key, parts) in &wanted {
             if gpu.has(key) {
-                drawn.push(key);
+                drawn.push((key, parts));
                 continue;
             }
             let insert = |gpu: &mut Gpu| match key {
                 EntryKey::Tile(k) => {
                     let t = &self.tiles[&k];
-                    let mut lines = t.drape.lines.clone();
-                    lines.extend_from_slice(&t.drape.points);
-                    gpu.insert(frame, key, t.origin, &lines, &t.drape.fills)
+                    let mut ends = QuadrantEnds::default();
+                    let (mut lines, mut fills) = (Vec::new(), Vec::new());
+                    for (q, piece) in t.drape.quadrants.iter().enumerate() {
+                        lines.extend(piece.line_instances().copied());
+                        fills.extend_from_slice(&piece.fills);
+                        ends.lines[q] = lines.len() as u32;
+                        ends.fills[q] = fills.len() as u32;
+                    }
+                    gpu.insert(frame, key, t.origin, &lines, &fills, ends)
                 }
                 EntryKey::Chunk(id, i) => {
                     let c = &self.entries[&id]
@@ -507,14 +516,16 @@ impl VectorLayer {
                         .as_ref()
                         .expect("a built feature")
                         .chunks[i as usize];
-                    gpu.insert(frame, key, c.origin, &c.lines, &c.fills)
+                    let ends = QuadrantEnds::whole(c.lines.len(), c.fills.len());
+                    gpu.insert(frame, key, c.origin, &c.lines, &c.fills, ends)
                 }
             };
             let mut fitted = insert(gpu);
             if !fitted && !made_room {
                 // Entries kept from earlier frames make room before anything drawn is left out.
                 made_room = true;
-                let wanted_set: rustc_hash::FxHashSet<EntryKey> = wanted.iter().copied().collect();
+                let wanted_set: rustc_hash::FxHashSet<EntryKey> =
+                    wanted.iter().map(|&(k, _)| k).collect();
                 let idle: Vec<EntryKey> = gpu.keys().filter(|k| !wanted_set.contains(k)).collect();
                 for k in idle {
                     gpu.remove(k);
@@ -522,7 +533,7 @@ impl VectorLayer {
                 fitted = insert(gpu);
             }
             if fitted {
-                drawn.push(key);
+                drawn.push((key, parts));
             } else {
                 left_out += 1;
             }

@@ -308,25 +308,39 @@ pub fn scratch(group: &str, name: &str) -> std::path::PathBuf {
 }
 
 /// A globe over a pyramid `globus tile` makes of the SRTM tile N57E011 (Terrarium PNG,
-/// geographic, to the source's own resolution) in the scratch folder `group/name`, with no
-/// procedural refinement below it.
-pub fn srtm_builder(group: &str, name: &str) -> globus_engine::GlobeBuilder {
+/// geographic, to the source's own resolution) in the scratch folder `group/srtm`, with no
+/// procedural refinement below it. The pyramid is made once per test binary and group: tests
+/// run in parallel, and two tilers writing one folder at once fail or leave each other torn
+/// tiles.
+pub fn srtm_builder(group: &str) -> globus_engine::GlobeBuilder {
     use globus_tiler::{ElevationEncoding, JobKind, TileJob};
-    let dir = scratch(group, name);
-    let job = TileJob {
-        threads: Some(2),
-        ..TileJob::new(
-            JobKind::Dem {
-                encoding: ElevationEncoding::Terrarium,
-                height_scale: None,
-            },
-            vec![globus_test_support::shared_data("N57E011.hgt")],
-            dir.join("srtm"),
-        )
+    use std::collections::HashMap;
+    use std::sync::{Mutex, PoisonError};
+    static MADE: Mutex<Option<HashMap<String, std::path::PathBuf>>> = Mutex::new(None);
+    let mut made = MADE.lock().unwrap_or_else(PoisonError::into_inner);
+    let pyramid = match made.get_or_insert_with(HashMap::new).get(group) {
+        Some(pyramid) => pyramid.clone(),
+        None => {
+            let pyramid = scratch(group, "srtm").join("srtm");
+            let job = TileJob {
+                threads: Some(2),
+                ..TileJob::new(
+                    JobKind::Dem {
+                        encoding: ElevationEncoding::Terrarium,
+                        height_scale: None,
+                    },
+                    vec![globus_test_support::shared_data("N57E011.hgt")],
+                    pyramid.clone(),
+                )
+            };
+            globus_tiler::run(&job).expect("tiling N57E011");
+            made.get_or_insert_with(HashMap::new)
+                .insert(group.to_owned(), pyramid.clone());
+            pyramid
+        }
     };
-    globus_tiler::run(&job).expect("tiling N57E011");
-    let spec =
-        globus_engine::SourceSpec::parse(dir.join("srtm").to_str().expect("utf-8")).expect("spec");
+    drop(made);
+    let spec = globus_engine::SourceSpec::parse(pyramid.to_str().expect("utf-8")).expect("spec");
     let mut builder = globus_engine::GlobeBuilder::new();
     builder.terrain(spec).max_level(0);
     builder

@@ -158,6 +158,9 @@ pub struct SelectionStats {
     pub max_sse_px: f64,
     /// Drawn tiles whose error is above the bound because their children are still loading.
     pub waiting_for_children: u32,
+    /// Tiles drawn only over some of their quadrants, beside loaded children
+    /// ([`DrawTile::parts`]).
+    pub drawn_in_part: u32,
 }
 
 /// The result of one selection; reuse it across frames with [`select_into`] to avoid
@@ -359,6 +362,7 @@ impl<O: TileOracle> Walk<'_, O> {
                 self.draw(drawn);
                 return;
             }
+            self.out.stats.drawn_in_part += 1;
             self.draw(DrawTile {
                 parts: missing,
                 ..drawn
