@@ -129,6 +129,21 @@ impl Frustum {
         }
     }
 
+    /// Whether a box is wholly outside the frustum, given a sphere that contains it: the
+    /// sphere settles each plane it is wholly inside or outside of, and only the planes it
+    /// straddles are tested with the box (the box's test costs four dot products a plane,
+    /// the sphere's one). The answer is the box's own: a box inside its sphere is outside a
+    /// plane only where the sphere is not wholly inside it.
+    pub fn culls(&self, s: &BoundingSphere, b: &OrientedBox) -> bool {
+        self.planes
+            .iter()
+            .any(|plane| match s.intersect_plane(plane) {
+                Intersection::Outside => true,
+                Intersection::Inside => false,
+                Intersection::Intersecting => b.intersect_plane(plane) == Intersection::Outside,
+            })
+    }
+
     /// Whether a point is inside all planes.
     pub fn contains_point(&self, p: DVec3) -> bool {
         self.planes.iter().all(|pl| pl.signed_distance(p) >= 0.0)
@@ -179,6 +194,51 @@ mod tests {
             assert!(!f.contains_point(ahead - v.up() * 1_010.0));
         }
         assert!(!f.contains_point(v.position + v.forward() * 0.5));
+    }
+
+    /// `culls` gives the box's own answer, over boxes of every size and orientation
+    /// around the frustum's edges.
+    #[test]
+    fn culling_with_the_sphere_first_is_the_box_test() {
+        let v = view();
+        let f = Frustum::from_view(&v, 1.0);
+        // A small deterministic generator (xorshift), uniform in [-1, 1).
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut r = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        };
+        let (mut culled, mut kept) = (0, 0);
+        for _ in 0..20_000 {
+            let centre = v.position
+                + v.forward() * (r() * 3_000.0 + 2_000.0)
+                + v.right() * r() * 3_000.0
+                + v.up() * r() * 2_000.0;
+            let axes = DMat3::from_euler(glam::EulerRot::XYZ, r() * 3.2, r() * 3.2, r() * 3.2);
+            let half_extents = DVec3::new(r(), r(), r()).abs() * 800.0 + DVec3::splat(1.0);
+            let b = OrientedBox {
+                centre,
+                axes,
+                half_extents,
+            };
+            let s = BoundingSphere {
+                centre,
+                radius: half_extents.length() * (1.0 + r().abs()),
+            };
+            let want = f.intersect_box(&b) == Intersection::Outside;
+            assert_eq!(f.culls(&s, &b), want, "{b:?} in {s:?}");
+            if want {
+                culled += 1;
+            } else {
+                kept += 1;
+            }
+        }
+        assert!(
+            culled > 2_000 && kept > 2_000,
+            "{culled} culled, {kept} kept"
+        );
     }
 
     #[test]

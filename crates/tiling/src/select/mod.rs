@@ -38,7 +38,7 @@ mod quadrants;
 pub use oracle::{TileInfo, TileOracle, TileState};
 pub use quadrants::Quadrants;
 
-use globus_geo::{Atmosphere, Ellipsoid, EllipsoidalOccluder, Frustum, Intersection, View};
+use globus_geo::{Atmosphere, Ellipsoid, EllipsoidalOccluder, Frustum, View};
 
 use crate::{TileBounds, TileKey};
 
@@ -247,16 +247,9 @@ impl<O: TileOracle> Walk<'_, O> {
     fn is_visible(&mut self, bounds: &TileBounds) -> bool {
         let stats = &mut self.out.stats;
         stats.nodes_visited += 1;
-        // The sphere contains the box: its cheaper test settles most tiles, wholly inside or
-        // wholly outside; only those it straddles need the box's.
-        let outside = match self.frustum.intersect_sphere(&bounds.sphere) {
-            Intersection::Outside => true,
-            Intersection::Inside => false,
-            Intersection::Intersecting => {
-                self.frustum.intersect_box(&bounds.obb) == Intersection::Outside
-            }
-        };
-        if outside {
+        // The sphere contains the box: its cheaper test settles most planes, and only those
+        // it straddles need the box's.
+        if self.frustum.culls(&bounds.sphere, &bounds.obb) {
             stats.culled_frustum += 1;
             return false;
         }
@@ -368,15 +361,23 @@ impl<O: TileOracle> Walk<'_, O> {
                 ..drawn
             });
         }
-        // Nearest child first: front-to-back order helps early depth rejection.
+        // Nearest child first: front-to-back order helps early depth rejection. (Four
+        // elements: an insertion sort over distances computed once.)
         let mut order = [0usize, 1, 2, 3];
-        let order = &mut order[..children.len()];
-        let dist = |i: usize| {
-            visible[i].as_ref().map_or(f64::INFINITY, |ci| {
-                ci.bounds.sphere.centre.distance_squared(self.eye)
-            })
-        };
-        order.sort_unstable_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)));
+        let order = &mut order[..n];
+        let mut dist = [f64::INFINITY; 4];
+        for (d, ci) in dist.iter_mut().zip(&visible) {
+            if let Some(ci) = ci {
+                *d = ci.bounds.sphere.centre.distance_squared(self.eye);
+            }
+        }
+        for k in 1..n {
+            let mut j = k;
+            while j > 0 && dist[order[j]] < dist[order[j - 1]] {
+                order.swap(j, j - 1);
+                j -= 1;
+            }
+        }
         // Siblings morph together (they share edges): by the family's largest error ratio,
         // which keeps every one of them within the bound.
         let excess = sse_px / self.options.max_sse_px;
