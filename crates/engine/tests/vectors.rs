@@ -57,6 +57,15 @@ const MAGENTA: [f64; 3] = [255.0, 0.0, 255.0];
 const LINE_PX: f64 = 4.0;
 const LINE_LAT: f64 = 57.45;
 
+/// Loads the ground under `cam` completely, then its view placed over that ground (a camera
+/// `above_ground` stands on the loaded surface).
+fn placed(off: &mut Headless, cam: &CameraSpec, (w, h): (u32, u32)) -> View {
+    let view = cam.view(off.globe(), 60.0, w, h);
+    off.render_complete(&view, TIMEOUT, &mut [])
+        .expect("render");
+    cam.view(off.globe(), 60.0, w, h)
+}
+
 /// Renders `view` with and without `layer`; saves both.
 fn with_and_without(
     off: &mut Headless,
@@ -76,25 +85,36 @@ fn with_and_without(
     (drawn, plain)
 }
 
-#[test]
-fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
+/// A headless globe over the SRTM pyramid and a layer with one east-west line along
+/// [`LINE_LAT`] from 11.05 to 11.95 E, styled by the simplestyle `properties` (JSON members),
+/// written to the scratch folder `name`.
+fn srtm_and_line(name: &str, properties: &str, (w, h): (u32, u32)) -> (Headless, VectorLayer) {
     let builder = common::srtm_builder("vectors");
-    let (w, h) = (480u32, 360u32);
-    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the pyramid");
-    let dir = common::scratch("vectors", "line");
+    let off = Headless::new(&builder, w, h).expect("a GPU or lavapipe, and the pyramid");
+    let dir = common::scratch("vectors", name);
     let file = write_geojson(
         &dir,
         "line.geojson",
         &format!(
-            r##"{{"type": "FeatureCollection", "features": [{{"type": "Feature",
-                "properties": {{"stroke": "#ff00ff", "stroke-width": {LINE_PX}, "path": "rhumb"}},
-                "geometry": {{"type": "LineString", "coordinates": [[11.05, {LINE_LAT}], [11.95, {LINE_LAT}]]}}}}]}}"##
+            r##"{{"type": "Feature", "properties": {{{properties}}},
+                "geometry": {{"type": "LineString", "coordinates": [[11.05, {LINE_LAT}], [11.95, {LINE_LAT}]]}}}}"##
         ),
     );
     let mut layer = VectorLayer::new();
     layer
         .add_file(&file, &StyleRules::default())
         .expect("line file");
+    (off, layer)
+}
+
+#[test]
+fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
+    let (w, h) = (480u32, 360u32);
+    let (mut off, mut layer) = srtm_and_line(
+        "line",
+        &format!(r##""stroke": "#ff00ff", "stroke-width": {LINE_PX}, "path": "rhumb""##),
+        (w, h),
+    );
     // Straight down at five altitudes above the ground, then low over the line looking along
     // a hillside at it.
     let views = [
@@ -107,10 +127,7 @@ fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
     ];
     for (k, &(lon, lat, alt, heading, pitch)) in views.iter().enumerate() {
         let cam = common::camera(lon, lat, alt, heading, pitch, true);
-        let mut view = cam.view(off.globe(), 60.0, w, h);
-        off.render_complete(&view, TIMEOUT, &mut [])
-            .expect("render");
-        view = cam.view(off.globe(), 60.0, w, h); // placed over the loaded ground
+        let view = placed(&mut off, &cam, (w, h));
         let name = format!("line_{k}_{alt}m_pitch{pitch}");
         let (img, bg) = with_and_without(&mut off, &view, &mut layer, &name);
         let globe = off.globe();
@@ -184,6 +201,91 @@ fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
             "{name}: width {median:.2} px, asked {LINE_PX}"
         );
     }
+}
+
+/// A translucent line is as strong where it crosses a drawn tile's midline as anywhere else:
+/// its pieces are kept by quadrant (so a tile drawn in part draws only its quadrants'), and
+/// the two runs meeting at a midline are cut square and abut instead of overlapping their
+/// round ends, which showed a darker dot at every crossing. (Where the line leaves a tile
+/// the ends are still drawn round: neighbours of other levels need not meet exactly.)
+#[test]
+fn a_translucent_line_has_no_dots_where_it_crosses_a_tiles_midline() {
+    let (w, h) = (480u32, 360u32);
+    let (mut off, mut layer) = srtm_and_line(
+        "translucent",
+        r##""stroke": "#ff00ff", "stroke-opacity": 0.5, "stroke-width": 6, "path": "rhumb""##,
+        (w, h),
+    );
+    let cam = common::camera(11.5, LINE_LAT, 20_000.0, 0.0, -90.0, true);
+    let view = placed(&mut off, &cam, (w, h));
+    let (img, bg) = with_and_without(&mut off, &view, &mut layer, "translucent_line");
+    let globe = off.globe();
+    let camera = *globe.camera().expect("a frame camera");
+    // Where the line crosses drawn tiles' edges (left out) and midlines, in screen x.
+    let (mut edges, mut midlines) = (Vec::new(), Vec::new());
+    let screen_x = |lon_rad: f64| {
+        camera
+            .project(on_ground(globe, lon_rad.to_degrees(), LINE_LAT))
+            .map(|p| p.x)
+    };
+    for d in globe.drawn_tiles() {
+        let r = globus_tiling::GLOBE_SCHEME.rect(d.key);
+        let lat = LINE_LAT.to_radians();
+        if lat < r.south || lat > r.north {
+            continue;
+        }
+        edges.extend([r.west, r.east].into_iter().filter_map(screen_x));
+        if d.parts.is_all() {
+            midlines.extend(screen_x((r.west + r.east) / 2.0));
+        }
+    }
+    let near = |xs: &[f64], x: f64| xs.iter().any(|&e| (e - x).abs() < 6.0);
+    let (mut plain, mut at_midlines) = (Vec::new(), Vec::new());
+    for s in 0..=4000 {
+        let lon = 11.05 + 0.9 * f64::from(s) / 4000.0;
+        let Some(px) = camera.project(on_ground(globe, lon, LINE_LAT)) else {
+            continue;
+        };
+        let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
+        if x < 3 || y < 3 || x >= i64::from(w) - 3 || y >= i64::from(h) - 3 || near(&edges, px.x) {
+            continue;
+        }
+        let c = coverage(&img, &bg, x, y, MAGENTA);
+        if c.is_nan() {
+            continue;
+        }
+        if midlines.iter().any(|&m| (m - px.x).abs() < 1.5) {
+            at_midlines.push(c);
+        } else if !near(&midlines, px.x) {
+            plain.push(c);
+        }
+    }
+    plain.sort_by(f64::total_cmp);
+    let median = plain[plain.len() / 2];
+    let strongest = at_midlines.iter().copied().fold(0.0, f64::max);
+    eprintln!(
+        "{} tiles, {} midlines crossed; coverage {median:.3} along the line (p1 {:.3}, p99 {:.3}), \
+         at most {strongest:.3} over {} samples at midlines",
+        globe.drawn_tiles().len(),
+        midlines.len(),
+        plain[plain.len() / 100],
+        plain[plain.len() * 99 / 100],
+        at_midlines.len()
+    );
+    assert!(
+        plain.len() > 1_000 && (0.3..0.8).contains(&median),
+        "{} samples, median coverage {median:.3}",
+        plain.len()
+    );
+    assert!(
+        at_midlines.len() >= 10,
+        "{} samples at midlines",
+        at_midlines.len()
+    );
+    assert!(
+        strongest < median + 0.08,
+        "coverage {strongest:.3} at a midline against {median:.3} along the line"
+    );
 }
 
 /// Even-odd point-in-polygon on the file's own coordinates (no unwrapping: Natural Earth
@@ -648,10 +750,7 @@ fn a_draped_fill_over_mountains_covers_what_the_cpu_projects_with_no_seams_betwe
     // Low over the Alps of the procedural planet, looking north across the box: tiles of
     // many levels meet inside it.
     let cam = common::camera(7.8, 45.75, 3_000.0, 0.0, -15.0, true);
-    let mut view = cam.view(off.globe(), 60.0, w, h);
-    off.render_complete(&view, TIMEOUT, &mut [])
-        .expect("render");
-    view = cam.view(off.globe(), 60.0, w, h);
+    let view = placed(&mut off, &cam, (w, h));
     let (img, bg) = with_and_without(&mut off, &view, &mut layer, "fill_over_mountains");
     let globe = off.globe();
     let levels: std::collections::BTreeSet<u8> =
@@ -1294,10 +1393,7 @@ fn a_million_vertex_line_draws_in_bounded_instances_where_the_cpu_puts_it() {
     let mut layer = VectorLayer::new();
     layer.add_batch([coast_feature, walk_feature]);
     let cam = common::camera(7.5, 46.45, 150_000.0, 0.0, -90.0, true);
-    let mut view = cam.view(off.globe(), 60.0, w, h);
-    off.render_complete(&view, TIMEOUT, &mut [])
-        .expect("render");
-    view = cam.view(off.globe(), 60.0, w, h);
+    let view = placed(&mut off, &cam, (w, h));
     let (img, bg) = with_and_without(&mut off, &view, &mut layer, "million_vertices");
     let stats = layer.stats();
     let tiles = off.update(&view).draw.tiles;
@@ -1354,10 +1450,7 @@ fn a_polygon_of_200000_vertices_fills_what_a_cpu_point_in_polygon_fills_in_bound
     let mut layer = VectorLayer::new();
     layer.add(polygon);
     let cam = common::camera(7.5, 46.4, 100_000.0, 0.0, -90.0, true);
-    let mut view = cam.view(off.globe(), 60.0, w, h);
-    off.render_complete(&view, TIMEOUT, &mut [])
-        .expect("render");
-    view = cam.view(off.globe(), 60.0, w, h);
+    let view = placed(&mut off, &cam, (w, h));
     let (img, bg) = with_and_without(&mut off, &view, &mut layer, "big_polygon");
     let stats = layer.stats();
     eprintln!("big polygon: {stats:?}");

@@ -7,7 +7,7 @@ use globus_terrain::{MorphVertex, TileMesh};
 use globus_vector::shape::{self, Position, Straight};
 use globus_vector::{Clamp, DrapeSurface, DrapedSegment, Feature, LineIndex, Rgba, Selection};
 
-use super::gpu::{FillVertex, LineInstance, LineLook, push_run};
+use super::gpu::{FillVertex, LineInstance, LineLook, RunEnd, push_run};
 
 /// Densification tolerance: drawn lines pass within this of their true path, metres.
 pub(crate) const PATH_TOLERANCE_M: f64 = 1.0;
@@ -658,7 +658,14 @@ impl ChunkWriter {
             }
             local.clear();
             local.extend(pts[i..=j].iter().map(|&p| p - origin));
-            let ends = (i == 0 && !closed, j + 1 == pts.len() && !closed);
+            let end = |line_end: bool| {
+                if line_end {
+                    RunEnd::Line
+                } else {
+                    RunEnd::Break
+                }
+            };
+            let ends = (end(i == 0 && !closed), end(j + 1 == pts.len() && !closed));
             push_run(&mut c.lines, &local, &along[i..=j], &[], id, look, ends);
             i = j;
         }
@@ -952,11 +959,18 @@ impl TileDrape {
             !l.closed && kept[kept.len() - 1] == last_vertex,
         );
         let last = (kept.len() - 1) as f64;
-        // Runs of pieces that meet end to end within one quadrant (where a line crosses a
-        // midline its run breaks, drawn round there as at a tile's edge).
-        for piece in segs
-            .chunk_by(|x: &DrapedSegment, y| x.along[1] == y.along[0] && x.quadrant == y.quadrant)
-        {
+        // Runs of pieces that meet end to end within one quadrant. Where a line crosses a
+        // midline its run breaks into the next quadrant's, the two ends cut square and
+        // abutting (a seam); where pieces do not meet (the line leaves the tile and comes
+        // back), the ends are drawn round.
+        let meets = |x: &DrapedSegment, y: &DrapedSegment| x.along[1] == y.along[0];
+        let mut first = 0usize;
+        for piece in segs.chunk_by(|x: &DrapedSegment, y| meets(x, y) && x.quadrant == y.quadrant) {
+            let (before, after) = (
+                first.checked_sub(1).and_then(|i| segs.get(i)),
+                segs.get(first + piece.len()),
+            );
+            first += piece.len();
             run.clear();
             lifts.clear();
             metres.clear();
@@ -966,12 +980,25 @@ impl TileDrape {
             lifts.extend(piece.iter().map(|s| s.lift_m[1]));
             metres.push(at(piece[0].along[0]));
             metres.extend(piece.iter().map(|s| at(s.along[1])));
-            let caps = (
-                starts && piece[0].along[0] == 0.0,
-                ends && piece[piece.len() - 1].along[1] == last,
+            let (head, tail) = (&piece[0], &piece[piece.len() - 1]);
+            let run_ends = (
+                if starts && head.along[0] == 0.0 {
+                    RunEnd::Line
+                } else if before.is_some_and(|b| meets(b, head)) {
+                    RunEnd::Seam
+                } else {
+                    RunEnd::Break
+                },
+                if ends && tail.along[1] == last {
+                    RunEnd::Line
+                } else if after.is_some_and(|a| meets(tail, a)) {
+                    RunEnd::Seam
+                } else {
+                    RunEnd::Break
+                },
             );
-            let lines = &mut self.quadrants[usize::from(piece[0].quadrant)].lines;
-            push_run(lines, run, metres, lifts, id, &l.look, caps);
+            let lines = &mut self.quadrants[usize::from(head.quadrant)].lines;
+            push_run(lines, run, metres, lifts, id, &l.look, run_ends);
         }
     }
 

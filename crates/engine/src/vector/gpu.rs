@@ -76,6 +76,13 @@ pub(crate) mod line_flags {
     pub const JOIN_SHIFT: u32 = 20;
     /// Cap: bits 22-23 (0 round, 1 butt, 2 square).
     pub const CAP_SHIFT: u32 = 22;
+    /// The line continues from this segment's start in a record drawn apart, whose end
+    /// meets this start exactly (a draped line crossing a tile's midline into the next
+    /// quadrant's pieces): cut square there, so the two abut without overlapping (a
+    /// translucent line would show round ends overlapping as a darker dot).
+    pub const SEAM_PREV: u32 = 1 << 24;
+    /// The same at this segment's end.
+    pub const SEAM_NEXT: u32 = 1 << 25;
 }
 
 /// Distances along lines are stored modulo this (2^21 m): every power-of-two dash period up
@@ -125,10 +132,22 @@ impl LineLook {
     }
 }
 
+/// How a run of a line's segments ends at either side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum RunEnd {
+    /// The line's own start or end: capped.
+    Line,
+    /// The line goes on in a run drawn apart whose end meets this one exactly (a draped
+    /// line crossing a tile's midline): cut square, abutting it.
+    Seam,
+    /// The line goes on elsewhere, not necessarily meeting this end exactly (where it leaves
+    /// a tile or a chunk): drawn round.
+    Break,
+}
+
 /// Appends the segments of a polyline run (`pts`, metres along the line `along`) to `out`,
-/// joined to each other; `start` / `end`: the run begins / ends where the line itself does
-/// (else the break is drawn round, as where a line leaves a tile or a chunk).
-/// `lifts`: the points' morph heights when draped (empty: none).
+/// joined to each other, its two ends as `ends` say. `lifts`: the points' morph heights when
+/// draped (empty: none).
 pub(crate) fn push_run(
     out: &mut Vec<LineInstance>,
     pts: &[DVec3],
@@ -136,22 +155,30 @@ pub(crate) fn push_run(
     lifts: &[f64],
     id: u32,
     look: &LineLook,
-    (start, end): (bool, bool),
+    (start, end): (RunEnd, RunEnd),
 ) {
     let lift = |i: usize| lifts.get(i).map_or(0.0, |&l| l as f32);
     let n = pts.len().saturating_sub(1);
     for i in 0..n {
         let mut flags = look.style_bits();
-        if i > 0 {
-            flags |= line_flags::JOINED_PREV;
-        } else if start {
-            flags |= line_flags::START;
-        }
-        if i + 1 < n {
-            flags |= line_flags::JOINED_NEXT;
-        } else if end {
-            flags |= line_flags::END;
-        }
+        flags |= if i > 0 {
+            line_flags::JOINED_PREV
+        } else {
+            match start {
+                RunEnd::Line => line_flags::START,
+                RunEnd::Seam => line_flags::SEAM_PREV,
+                RunEnd::Break => 0,
+            }
+        };
+        flags |= if i + 1 < n {
+            line_flags::JOINED_NEXT
+        } else {
+            match end {
+                RunEnd::Line => line_flags::END,
+                RunEnd::Seam => line_flags::SEAM_NEXT,
+                RunEnd::Break => 0,
+            }
+        };
         let a = along[i].rem_euclid(ALONG_PERIOD_M);
         let b = a + (along[i + 1] - along[i]);
         out.push(LineInstance {

@@ -165,6 +165,8 @@ const START: u32 = 0x40000u;
 const END: u32 = 0x80000u;
 const JOIN_SHIFT: u32 = 20u;
 const CAP_SHIFT: u32 = 22u;
+const SEAM_PREV: u32 = 0x1000000u;
+const SEAM_NEXT: u32 = 0x2000000u;
 const ROUND: u32 = 0u;
 const MITER: u32 = 1u;
 const BUTT: u32 = 1u;
@@ -263,10 +265,10 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
     var flags = v.icon_flags & 0xffff0000u;
     if (ca.w < NEAR_W) {
         ca = mix(ca, cb, (NEAR_W - ca.w) / (cb.w - ca.w));
-        flags &= ~(JOINED_PREV | START);
+        flags &= ~(JOINED_PREV | START | SEAM_PREV);
     } else if (cb.w < NEAR_W) {
         cb = mix(cb, ca, (NEAR_W - cb.w) / (ca.w - cb.w));
-        flags &= ~(JOINED_NEXT | END);
+        flags &= ~(JOINED_NEXT | END | SEAM_NEXT);
     }
     let sa = to_pixels(ca);
     let sb = to_pixels(cb);
@@ -293,6 +295,14 @@ fn line_vs(@builtin(vertex_index) vertex: u32) -> LineOut {
         if (cn.w >= NEAR_W) {
             jb = join_at(dir, direction(sb, to_pixels(cn)), hw, join);
         }
+    }
+    // A seam: the line goes on in a record drawn apart that starts (ends) exactly here; both
+    // cut square across this segment's direction, so they abut without overlapping.
+    if ((flags & SEAM_PREV) != 0u) {
+        ja = Join(vec4<f32>(dir, 0.0, 0.0), 1e30);
+    }
+    if ((flags & SEAM_NEXT) != 0u) {
+        jb = Join(vec4<f32>(dir, 0.0, 0.0), 1e30);
     }
     // Half width plus a pixel for antialiasing across; along, room for a miter's tip.
     let r = hw + 1.0;
@@ -426,7 +436,7 @@ fn line_fs(in: LineOut) -> Target {
     if (outline_px < 0.0) {
         dist = max(off.x, off.y);
     }
-    if ((flags & (JOINED_PREV | JOINED_NEXT | START | END)) != 0u) {
+    if ((flags & (JOINED_PREV | JOINED_NEXT | START | END | SEAM_PREV | SEAM_NEXT)) != 0u) {
         // A line's segment: the slab between its ends, each end joined, capped or round.
         if (dot(p - in.sa, in.join_a.xy) < 0.0 || dot(p - in.sb, in.join_b.xy) > 0.0) {
             discard; // the neighbour's side of the dividing line
