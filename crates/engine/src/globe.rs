@@ -544,6 +544,7 @@ impl Globe {
                 last_eye,
                 lookahead_frames: self.request_lookahead_frames,
                 near_m,
+                above_ground_m: (eye.height_m - ground).max(0.0),
             },
         );
         let layer_stats =

@@ -33,6 +33,8 @@ pub(crate) struct Motion<'a> {
     pub last_eye: Option<DVec3>,
     pub lookahead_frames: f64,
     pub near_m: f64,
+    /// The eye's height above the ground, metres.
+    pub above_ground_m: f64,
 }
 
 impl FramePlan {
@@ -93,8 +95,18 @@ fn defer_requests_left_behind(
     if motion.lookahead_frames <= 0.0 || step == DVec3::ZERO {
         return 0;
     }
+    // The eye moved on, but never down by more than half its height above the ground: a
+    // camera coming down fast (a dive slows as it nears the ground) would otherwise be
+    // predicted under the ground, where nothing is in view and every request would wait.
     let mut ahead = *motion.view;
-    ahead.position += step * motion.lookahead_frames;
+    let mut reach = step * motion.lookahead_frames;
+    let up = motion.view.position.normalize_or_zero();
+    let down = -reach.dot(up);
+    let most = 0.5 * motion.above_ground_m.max(0.0);
+    if down > most {
+        reach += up * (down - most);
+    }
+    ahead.position += reach;
     let frustum = Frustum::from_view(&ahead, motion.near_m);
     let before = to_load.len();
     // The ancestor walk only for tiles the predicted view misses.
@@ -156,6 +168,7 @@ mod tests {
             last_eye,
             lookahead_frames,
             near_m: 1.0,
+            above_ground_m: 10_000.0,
         };
         let mut to_load = vec![request(behind), request(ahead)];
         let deferred =
@@ -180,6 +193,57 @@ mod tests {
             assert_eq!(deferred, 0);
             assert_eq!(to_load.len(), 2);
         }
+    }
+
+    /// A camera coming straight down fast, 800 m above the ground and 600 m lower every
+    /// frame: three frames ahead at that speed it would be under the ground, and the tile
+    /// under it would look left behind. The prediction stops halfway to the ground, so that
+    /// tile is requested; one at the edge of today's view, which the narrowing view leaves,
+    /// still waits.
+    #[test]
+    fn a_diving_camera_is_not_predicted_under_the_ground() {
+        let source = Arc::new(ProceduralSource::new(crate::DEFAULT_SEED, 16));
+        let layer = TerrainLayer::new(source, TerrainLayerOptions::default());
+        let ellipsoid = Ellipsoid::WGS84;
+        let at = |lat: f64, h: f64| Cartographic::from_degrees(10.0, lat, h);
+        let view = View::from_geodetic(
+            &ellipsoid,
+            at(45.0, 800.0),
+            0.0,
+            -90f64.to_radians(),
+            60f64.to_radians(),
+            960,
+            540,
+        );
+        let eye = at(45.0, 800.0);
+        let below = GLOBE_SCHEME
+            .tile_at(eye.lon_rad, eye.lat_rad, 14)
+            .expect("tile");
+        // 400 m north on the ground: inside the bottom of a 60 degree view from 800 m.
+        let edge = GLOBE_SCHEME
+            .tile_at(eye.lon_rad, eye.lat_rad + 400.0 / 6_371_000.0, 16)
+            .expect("tile");
+        let now = Frustum::from_view(&view, 1.0);
+        for key in [below, edge] {
+            assert_ne!(
+                now.intersect_box(&layer.tile(key).bounds.obb),
+                Intersection::Outside,
+                "{key} in today's view"
+            );
+        }
+        let last_eye = Some(ellipsoid.cartographic_to_ecef(at(45.0, 1_400.0)));
+        let motion = Motion {
+            view: &view,
+            last_eye,
+            lookahead_frames: 3.0,
+            near_m: 1.0,
+            above_ground_m: 800.0,
+        };
+        let request = |key| TileRequest { key, priority: 1.0 };
+        let mut to_load = vec![request(below), request(edge)];
+        let deferred = defer_requests_left_behind(&layer, motion, |_| true, &mut to_load);
+        assert_eq!(to_load.iter().map(|r| r.key).collect::<Vec<_>>(), [below]);
+        assert_eq!(deferred, 1);
     }
 
     /// Drawn tiles and their ancestors are in use, each once; wanted tiles split into those
@@ -226,6 +290,7 @@ mod tests {
                 last_eye: None,
                 lookahead_frames: 3.0,
                 near_m: 1.0,
+                above_ground_m: 10_000.0,
             },
         );
         // a and b share their parent (5/10/7 and 5/11/7 are siblings) and everything above.
