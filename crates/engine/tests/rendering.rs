@@ -230,9 +230,23 @@ fn the_poles_seen_from_above_have_no_cracks_and_no_streaks() {
 /// Adaptive meshes of every size meet at tile borders of different levels (ocean tiles cut to
 /// a few dozen triangles beside mountain tiles keeping most of their grid): skirts must close
 /// every crack.
+/// Rays that hit the ellipsoid 3 km below the surface must hit terrain (no surface is lower
+/// than the sea, and meshes sag below it by far less than 3 km), and the planet fills at least
+/// 10,000 pixels of the view.
+fn assert_ground_closed(name: &str, img: &RgbaImage, view: &View) {
+    let (inside, holes) = holes_inside(img, view, &Ellipsoid::WGS84.grown(-3_000.0));
+    assert!(
+        inside > 10_000,
+        "{name}: the planet fills the lower part of the view"
+    );
+    assert_eq!(
+        holes, 0,
+        "{name}: {holes} background pixels inside the planet's silhouette"
+    );
+}
+
 #[test]
 fn mixed_level_adaptive_meshes_leave_no_cracks() {
-    let e = Ellipsoid::WGS84;
     // Oblique views where tiles of many levels meet: over mountains, over a coast and over the
     // north pole.
     for (name, cam) in [
@@ -266,17 +280,7 @@ fn mixed_level_adaptive_meshes_leave_no_cracks() {
             draw.tiles
         );
         assert_eq!(draw.draw_calls, 2, "{name}: sky and one multi-draw");
-        // Rays that hit the ellipsoid 3 km below the surface must hit terrain: no surface is
-        // lower than the sea, and meshes sag below it by far less than 3 km.
-        let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-3_000.0));
-        assert!(
-            inside > 10_000,
-            "{name}: the planet fills the lower part of the view"
-        );
-        assert_eq!(
-            holes, 0,
-            "{name}: {holes} background pixels inside the planet's silhouette"
-        );
+        assert_ground_closed(name, &frame.image, &view);
     }
 }
 
@@ -342,7 +346,6 @@ impl globus_engine::TerrainSource for FailingTiles {
 /// loaded.
 #[test]
 fn parents_drawn_in_part_beside_loaded_children_leave_no_cracks() {
-    let e = Ellipsoid::WGS84;
     let cam = camera(7.6, 46.0, 2_500.0, 200.0, -12.0, true);
     let (w, h) = (640, 360);
     let (whole, _) = render("in_part_reference", cam, w, h);
@@ -357,15 +360,7 @@ fn parents_drawn_in_part_beside_loaded_children_leave_no_cracks() {
         sel.drawn_in_part,
         sel.selected
     );
-    let (inside, holes) = holes_inside(&frame.image, &view, &e.grown(-3_000.0));
-    assert!(
-        inside > 10_000,
-        "the planet fills the lower part of the view"
-    );
-    assert_eq!(
-        holes, 0,
-        "{holes} background pixels inside the planet's silhouette"
-    );
+    assert_ground_closed("in_part", &frame.image, &view);
     // The parents' coarser surface stands in for the failed children: the same ground,
     // a little smoother.
     let (mut sum, mut far) = (0.0, 0u32);
