@@ -383,26 +383,12 @@ impl MeshQuadrants {
             f(self.whole());
             return;
         }
-        let mut run: Option<Range<u32>> = None;
-        for section in 0..3 {
-            for q in (0..4).filter(|&q| parts.contains(q)) {
-                let r = self.section(section, q);
-                if r.is_empty() {
-                    continue;
-                }
-                match &mut run {
-                    Some(open) if open.end == r.start => open.end = r.end,
-                    _ => {
-                        if let Some(done) = run.replace(r) {
-                            f(done);
-                        }
-                    }
-                }
-            }
-        }
-        if let Some(done) = run {
-            f(done);
-        }
+        let sections = (0..3).flat_map(|section| {
+            (0..4)
+                .filter(move |&q| parts.contains(q))
+                .map(move |q| self.section(section, q))
+        });
+        globus_tiling::merge_touching(sections, f);
     }
 }
 

@@ -37,5 +37,5 @@ pub const GLOBE_SCHEME: TilingScheme = TilingScheme::GeographicReduced;
 
 pub use select::{
     DrawTile, Quadrants, Selection, SelectionOptions, SelectionStats, TileInfo, TileOracle,
-    TileRequest, TileState, keeps_longer, morph_fraction, select, select_into,
+    TileRequest, TileState, keeps_longer, merge_touching, morph_fraction, select, select_into,
 };

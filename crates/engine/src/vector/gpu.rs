@@ -341,26 +341,11 @@ impl QuadrantEnds {
         }
     }
 
-    /// The ranges (relative to the entry's start) that draw `parts`, with neighbouring
-    /// quadrants merged: at most two per kind; empty ones left out.
-    fn ranges(ends: &[u32; 4], parts: Quadrants, mut f: impl FnMut(Range<u32>)) {
-        let mut open: Option<Range<u32>> = None;
-        for q in 0..4 {
-            let start = if q == 0 { 0 } else { ends[q - 1] };
-            if !parts.contains(q) {
-                if let Some(r) = open.take().filter(|r| !r.is_empty()) {
-                    f(r);
-                }
-                continue;
-            }
-            open = Some(match open {
-                Some(r) => r.start..ends[q],
-                None => start..ends[q],
-            });
-        }
-        if let Some(r) = open.filter(|r| !r.is_empty()) {
-            f(r);
-        }
+    /// The ranges (relative to the entry's start) that draw `parts`, touching ones merged
+    /// (at most two per kind) and empty ones left out.
+    fn ranges(ends: &[u32; 4], parts: Quadrants, f: impl FnMut(Range<u32>)) {
+        let quadrant = |q: usize| if q == 0 { 0 } else { ends[q - 1] }..ends[q];
+        globus_tiling::merge_touching((0..4).filter(|&q| parts.contains(q)).map(quadrant), f);
     }
 }
 
@@ -1277,7 +1262,8 @@ mod tests {
         assert_eq!(ranges(ends, 0b1001), [(0, 2), (5, 9)]);
         assert_eq!(ranges(ends, 0b0100), []);
         assert_eq!(ranges(ends, 0b0110), [(2, 5)]);
-        assert_eq!(ranges(ends, 0b1010), [(2, 5), (5, 9)]);
+        // Quadrant 2 is empty, so 1 and 3 touch.
+        assert_eq!(ranges(ends, 0b1010), [(2, 9)]);
         assert_eq!(ranges(ends, 0), []);
         // Every set draws each drawn quadrant's pieces once and nothing else.
         for bits in 0..16u8 {

@@ -36,7 +36,7 @@ mod oracle;
 mod quadrants;
 
 pub use oracle::{TileInfo, TileOracle, TileState};
-pub use quadrants::Quadrants;
+pub use quadrants::{Quadrants, merge_touching};
 
 use globus_geo::{Atmosphere, Ellipsoid, EllipsoidalOccluder, Frustum, View};
 

@@ -1,5 +1,7 @@
 //! [`Quadrants`]: which quarters of a tile are drawn.
 
+use std::ops::Range;
+
 use crate::{TileKey, TilingScheme};
 
 /// A set of a tile's quadrants, as the bits of a byte: bit 0 the north-west quarter, 1 the
@@ -75,6 +77,26 @@ impl Quadrants {
             bits |= 1 << (row + 1);
         }
         Some(Self(bits))
+    }
+}
+
+/// Calls `f` with `ranges` in order, each run of ranges that touch (one's end the next's
+/// start) merged into one and empty ones left out: the draw records of a tile drawn in part,
+/// whose quadrants' pieces lie in order in one buffer.
+pub fn merge_touching(ranges: impl IntoIterator<Item = Range<u32>>, mut f: impl FnMut(Range<u32>)) {
+    let mut run: Option<Range<u32>> = None;
+    for r in ranges.into_iter().filter(|r| !r.is_empty()) {
+        match &mut run {
+            Some(open) if open.end == r.start => open.end = r.end,
+            _ => {
+                if let Some(done) = run.replace(r) {
+                    f(done);
+                }
+            }
+        }
+    }
+    if let Some(done) = run {
+        f(done);
     }
 }
 
