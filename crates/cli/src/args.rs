@@ -285,6 +285,11 @@ pub struct BenchArgs {
     /// figures, where loads race the camera.
     #[arg(long)]
     pub realtime: bool,
+    /// Path benchmark only: also write every frame's figures (time, tiles drawn, nodes
+    /// visited, error bound, tiles wanted, loads) to this CSV file, to see where a summary's
+    /// medians come from.
+    #[arg(long = "frames-csv", requires = "path")]
+    pub frames_csv: Option<PathBuf>,
     /// Jump benchmark only: prepare every frame (selection, loads, uploads) but rasterise
     /// only the first, so software rendering does not take the cores the loaders need.
     #[arg(long = "no-draw")]

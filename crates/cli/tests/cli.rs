@@ -310,6 +310,7 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
         r#"{"t": 0, "lon": 7.6, "lat": 46, "alt": 40000, "heading": 0, "pitch": -30},
            {"t": 6, "lon": 7.9, "lat": 46.2, "alt": 20000, "heading": 40, "pitch": -20}"#,
     );
+    let csv = std::env::temp_dir().join(format!("globus-fps-frames-{}.csv", std::process::id()));
     let held = json(&globus(&[
         "bench",
         "--path",
@@ -320,6 +321,8 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
         "1000",
         "--sse-max",
         "6",
+        "--frames-csv",
+        csv.to_str().unwrap(),
     ]));
     let bound = &held["sse_bound_px"];
     let (median, max) = (
@@ -339,6 +342,25 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
         held["nodes_culled"]["max"].as_f64().unwrap() > 0.0,
         "{held}"
     );
+    // --frames-csv: a row per frame (6 s at 30 fps), whose bounds are the summary's.
+    let text = std::fs::read_to_string(&csv).expect("the frames CSV");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let column = header
+        .iter()
+        .position(|&c| c == "sse_bound_px")
+        .expect("an sse_bound_px column");
+    let bounds: Vec<f64> = lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            assert_eq!(cells.len(), header.len(), "{l}");
+            cells[column].parse().expect("a number")
+        })
+        .collect();
+    assert_eq!(bounds.len(), 181);
+    let most = bounds.iter().copied().fold(0.0, f64::max);
+    assert!((most - max).abs() < 1e-3, "CSV {most}, summary {max}");
+    std::fs::remove_file(&csv).ok();
     std::fs::remove_file(&path).ok();
 }
 

@@ -763,7 +763,9 @@ impl Globe {
     }
 
     /// Frames until everything the selection wants is loaded and resident, imagery included
-    /// (or `timeout`). Returns the last frame's report and whether it completed.
+    /// (or `timeout`). Returns the last frame's report and whether it completed. While it
+    /// settles, uploads are unlimited and the bound only rises; both are as before when it
+    /// returns, so live frames after it upload and relax as configured.
     pub fn load_completely(&mut self, view: &View, timeout: Duration) -> (FrameReport, bool) {
         self.load_completely_reporting(view, timeout, &mut |_| {})
     }
@@ -777,6 +779,9 @@ impl Globe {
         on_frame: &mut dyn FnMut(&FrameReport),
     ) -> (FrameReport, bool) {
         let deadline = Instant::now() + timeout;
+        // Settling changes how uploads and the bound move; live frames after it go on as
+        // they were configured (a viewer that shows its start view complete, then flies).
+        let live = (self.renderer.pool().uploads_per_frame(), self.relax_detail);
         self.set_uploads_per_frame(u32::MAX);
         // Start from the configured bound and only raise it if budgets force it, so the same
         // view always settles on the same tiles.
@@ -842,7 +847,18 @@ impl Globe {
             }
         };
         self.renderer.set_colour_fade(fade);
+        self.set_uploads_per_frame(live.0);
+        self.relax_detail = live.1;
         settled
+    }
+
+    /// One [`Globe::update`] of a settled view, as [`Globe::load_completely`] makes them: the
+    /// bound does not relax (the frame after a complete load draws what was loaded).
+    pub(crate) fn update_settled(&mut self, view: &View) -> FrameReport {
+        let relax = std::mem::replace(&mut self.relax_detail, false);
+        let report = self.update(view);
+        self.relax_detail = relax;
+        report
     }
 }
 

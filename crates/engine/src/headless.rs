@@ -101,7 +101,7 @@ impl Headless {
             .load_completely_reporting(view, timeout, on_frame);
         let load_ms = started.elapsed().as_secs_f64() * 1e3;
         // A final frame on the complete data, timed on its own.
-        let report = self.globe.update(view);
+        let report = self.globe.update_settled(view);
         let image = self.draw_and_read(overlays)?;
         Ok(RenderedFrame {
             image,

@@ -845,3 +845,62 @@ fn the_sky_lights_the_ground_through_twilight_and_not_at_night() {
     let floored = at(-25.0, 0.1);
     assert!(floored > 5.0, "a floor of 0.1 at night: {floored:.2}");
 }
+
+/// A viewer that shows its start view complete and then flies goes on as configured: at most
+/// its uploads per frame, and a bound that settling raised comes back down once the budgets
+/// have room. Settling used to leave uploads unlimited and the bound unable to fall for the
+/// rest of the session (`bench --realtime`, which loads its start view first, uploaded
+/// everything that arrived in every frame and kept a bound of 4.88 px to the end of the
+/// path).
+#[test]
+fn live_frames_after_a_complete_load_upload_and_relax_as_configured() {
+    let (w, h) = (320, 180);
+    let mut builder = GlobeBuilder::new();
+    builder.gpu_tiles(48).uploads_per_frame(2);
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+    // A low view towards the horizon wants more tiles than 48 slots hold: settling raises
+    // the bound.
+    let low = camera(7.6, 46.0, 2000.0, 20.0, -5.0, true).view(off.globe(), 60.0, w, h);
+    let settled = off.render_complete(&low, TIMEOUT, &mut []).expect("render");
+    assert!(settled.complete, "the low view did not settle");
+    let raised = settled.report.sse_bound_px;
+    assert!(raised > 2.4, "settling did not raise the bound: {raised}");
+    // Live frames from far above, where everything fits.
+    let high = camera(7.6, 46.0, 8_000_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let mut frames = 0;
+    let mut report = off.update(&high);
+    while frames < 400 && !(report.sse_bound_px == 2.0 && report.is_complete()) {
+        off.globe_mut()
+            .layer_mut()
+            .wait_for_tiles(Duration::from_millis(20));
+        report = off.update(&high);
+        frames += 1;
+    }
+    assert_eq!(
+        report.sse_bound_px, 2.0,
+        "the bound stayed at {} after {frames} live frames (settled at {raised})",
+        report.sse_bound_px
+    );
+    assert!(report.is_complete(), "the high view never completed");
+    // Elsewhere, with every requested tile arrived before the next frame: uploads alone
+    // hold the frames back, 2 at a time.
+    let other = camera(-100.0, 40.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let mut uploads = Vec::new();
+    for _ in 0..200 {
+        let report = off.update(&other);
+        uploads.push(report.pool.uploaded_this_frame);
+        if report.is_complete() {
+            break;
+        }
+        let until = std::time::Instant::now() + Duration::from_secs(10);
+        while off.globe().layer().loading() > 0 && std::time::Instant::now() < until {
+            off.globe_mut()
+                .layer_mut()
+                .wait_for_tiles(Duration::from_millis(50));
+        }
+    }
+    assert!(
+        uploads.iter().all(|&n| n <= 2) && uploads.contains(&2),
+        "tiles uploaded per live frame, 2 configured: {uploads:?}"
+    );
+}

@@ -483,6 +483,11 @@ impl TilePool {
         self.stats.uploaded_this_frame = 0;
     }
 
+    /// How many tiles may be uploaded per frame.
+    pub fn uploads_per_frame(&self) -> u32 {
+        self.options.uploads_per_frame
+    }
+
     /// Sets how many tiles may be uploaded per frame (offline rendering lifts the limit).
     pub fn set_uploads_per_frame(&mut self, n: u32) {
         self.options.uploads_per_frame = n;

@@ -29,6 +29,11 @@ struct FrameSample {
     tiles_wanted_not_drawable: u32,
     tiles_showing_ancestor_imagery: u32,
     sse_bound_px: f64,
+    drawn_in_part: u32,
+    arrived: u32,
+    loading: u32,
+    evicted: u32,
+    requests_deferred: u32,
 }
 
 impl FrameSample {
@@ -45,7 +50,38 @@ impl FrameSample {
             tiles_wanted_not_drawable: r.wanted,
             tiles_showing_ancestor_imagery: r.colours_pending,
             sse_bound_px: r.sse_bound_px,
+            drawn_in_part: r.selection.drawn_in_part,
+            arrived: r.layer.arrived,
+            loading: r.layer.loading,
+            evicted: r.layer.evicted,
+            requests_deferred: r.requests_deferred,
         }
+    }
+
+    const CSV_HEADER: &str = "t_s,frame_ms,select_us,select_cpu_us,tiles_rendered,drawn_in_part,\
+        nodes_visited,nodes_culled,draw_calls,triangles,wanted_not_drawable,\
+        showing_ancestor_imagery,sse_bound_px,arrived,loading,evicted,requests_deferred";
+
+    fn csv_row(&self, t: f64) -> String {
+        format!(
+            "{t:.3},{:.3},{:.1},{:.1},{},{},{},{},{},{},{},{},{:.4},{},{},{},{}",
+            self.frame_ms,
+            self.select_us,
+            self.select_cpu_us,
+            self.tiles_rendered,
+            self.drawn_in_part,
+            self.nodes_visited,
+            self.nodes_culled,
+            self.draw_calls,
+            self.triangles,
+            self.tiles_wanted_not_drawable,
+            self.tiles_showing_ancestor_imagery,
+            self.sse_bound_px,
+            self.arrived,
+            self.loading,
+            self.evicted,
+            self.requests_deferred,
+        )
     }
 
     fn complete(&self) -> bool {
@@ -138,6 +174,16 @@ pub fn run(
         off.globe_mut().frame_time(frame_s);
         samples.push(FrameSample::new(&r, frame_s * 1e3));
         deferred += u64::from(r.requests_deferred);
+    }
+    if let Some(csv) = &a.frames_csv {
+        let mut text = String::from(FrameSample::CSV_HEADER);
+        text.push('\n');
+        for (i, s) in samples.iter().enumerate() {
+            text.push_str(&s.csv_row(i as f64 / a.fps));
+            text.push('\n');
+        }
+        globus_tiling::files::write_atomic(csv, text.as_bytes())
+            .with_context(|| format!("cannot write {}", csv.display()))?;
     }
     let column = |f: fn(&FrameSample) -> f64| quantiles(samples.iter().map(f).collect());
     let complete = samples.iter().filter(|s| s.complete()).count();
