@@ -4,6 +4,7 @@
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
+use std::ops::{Add, Mul, Sub};
 
 use super::orient;
 use super::scan::{Scanner, Verdict};
@@ -23,6 +24,8 @@ pub(super) fn refine(scanner: &Scanner<'_>) -> (Vec<[u16; 2]>, Vec<[u32; 3]>) {
         version: Vec::new(),
         queue: BinaryHeap::new(),
         pending: Vec::new(),
+        flips: Vec::new(),
+        narrow: n < 4096,
     };
     // North-west to south-east diagonal, as RTIN; edge 0 -> 2 is half-edge 0 and 3.
     r.push_triangle([0, 2, 1]);
@@ -73,8 +76,13 @@ struct Refiner<'a> {
     candidate: Vec<[u16; 2]>,
     version: Vec<u32>,
     queue: BinaryHeap<Entry>,
-    /// Triangles created or changed since the last rescan.
+    /// Triangles created or changed since the last rescan (a triangle flipped twice is
+    /// here twice).
     pending: Vec<u32>,
+    /// [`Refiner::legalize`]'s stack of edges to check, kept from insertion to insertion.
+    flips: Vec<u32>,
+    /// Coordinates below 4096: the in-circle test fits i64.
+    narrow: bool,
 }
 
 fn next(e: u32) -> u32 {
@@ -123,6 +131,9 @@ impl Refiner<'_> {
     }
 
     fn rescan_pending(&mut self) {
+        // An insertion's flips change some triangles twice or more: scan each once.
+        self.pending.sort_unstable();
+        self.pending.dedup();
         while let Some(t) = self.pending.pop() {
             let i = 3 * t as usize;
             let p = [
@@ -215,7 +226,8 @@ impl Refiner<'_> {
     /// Restores the Delaunay property across half-edge `e` = (a -> b) of triangle
     /// [a, b, p] whose apex p is the newly inserted point, flipping recursively.
     fn legalize(&mut self, e: u32) {
-        let mut stack = vec![e];
+        let mut stack = std::mem::take(&mut self.flips);
+        stack.push(e);
         while let Some(e) = stack.pop() {
             let o = self.twin[e as usize];
             if o == NONE {
@@ -229,7 +241,13 @@ impl Refiner<'_> {
                 self.tris[next(next(e)) as usize],
             );
             let q = self.tris[next(next(o)) as usize];
-            if !in_circle(self.point(a), self.point(b), self.point(p), self.point(q)) {
+            let corners = [a, b, p, q].map(|v| self.point(v));
+            let flip = if self.narrow {
+                in_circle::<i64>(corners)
+            } else {
+                in_circle::<i128>(corners)
+            };
+            if !flip {
                 continue;
             }
             let (h_bp, h_pa) = (
@@ -247,21 +265,29 @@ impl Refiner<'_> {
             stack.push(3 * t);
             stack.push(3 * s);
         }
+        self.flips = stack;
     }
 }
 
-/// Whether `d` is strictly inside the circumcircle of triangle (a, b, c), either orientation.
-fn in_circle(a: [u16; 2], b: [u16; 2], c: [u16; 2], d: [u16; 2]) -> bool {
-    let rel = |p: [u16; 2]| {
-        (
-            i128::from(p[0]) - i128::from(d[0]),
-            i128::from(p[1]) - i128::from(d[1]),
-        )
-    };
+/// Whether `d` is strictly inside the circumcircle of triangle (a, b, c), either orientation,
+/// computed exactly in `T`: i128 always suffices; i64 does for coordinates below 2^12 (the
+/// determinant's three products are each below 2^12 * 2^38, their sum below 2^52).
+fn in_circle<T>([a, b, c, d]: [[u16; 2]; 4]) -> bool
+where
+    T: Copy
+        + Default
+        + PartialOrd
+        + From<u16>
+        + Add<Output = T>
+        + Sub<Output = T>
+        + Mul<Output = T>,
+{
+    let rel = |p: [u16; 2]| (T::from(p[0]) - T::from(d[0]), T::from(p[1]) - T::from(d[1]));
     let (a, b, c) = (rel(a), rel(b), rel(c));
-    let lift = |p: (i128, i128)| p.0 * p.0 + p.1 * p.1;
+    let lift = |p: (T, T)| p.0 * p.0 + p.1 * p.1;
     let det = a.0 * (b.1 * lift(c) - lift(b) * c.1) - a.1 * (b.0 * lift(c) - lift(b) * c.0)
         + lift(a) * (b.0 * c.1 - b.1 * c.0);
     let o = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
-    det * o.signum() > 0
+    let zero = T::default();
+    (det > zero && o > zero) || (det < zero && o < zero)
 }

@@ -15,6 +15,18 @@ pub(super) fn remove_vertices(
     triangles: Vec<[u32; 3]>,
     options: &DecimateOptions,
 ) -> Vec<[u32; 3]> {
+    remove_vertices_with(scanner, points, triangles, options, true)
+}
+
+/// [`remove_vertices`], with or without [`Soup::some_triangle_holds`] before the ears are
+/// scanned (the same result either way, only slower without).
+fn remove_vertices_with(
+    scanner: &Scanner<'_>,
+    points: &[[u16; 2]],
+    triangles: Vec<[u32; 3]>,
+    options: &DecimateOptions,
+    prefilter: bool,
+) -> Vec<[u32; 3]> {
     let grid = scanner.grid();
     let mut m = Soup {
         grid,
@@ -25,6 +37,7 @@ pub(super) fn remove_vertices(
         limit: options.max_error,
         scanner,
         scratch: Scratch::default(),
+        prefilter,
     };
     m.alive = vec![true; m.tris.len()];
     for (t, tri) in m.tris.iter().enumerate() {
@@ -123,6 +136,8 @@ struct Soup<'a> {
     limit: f64,
     scanner: &'a Scanner<'a>,
     scratch: Scratch,
+    /// Whether [`Soup::some_triangle_holds`] is asked first.
+    prefilter: bool,
 }
 
 /// Buffers of one removal, kept from vertex to vertex.
@@ -208,6 +223,9 @@ impl Soup<'_> {
         if z > high + self.limit || z < low - self.limit {
             return false;
         }
+        if self.prefilter && !self.some_triangle_holds(v, ring, z) {
+            return false;
+        }
         let mut scratch = std::mem::take(&mut self.scratch);
         let done = self.clip_ears(ring, &mut scratch);
         if done {
@@ -230,6 +248,43 @@ impl Soup<'_> {
         }
         self.scratch = scratch;
         done
+    }
+
+    /// Whether some triangle of three ring vertices holds `v`'s sample within the bound: any
+    /// filling of the hole has one triangle over `v`, made of ring vertices, so without one
+    /// the removal cannot succeed and no ear need be scanned. Most failed removals fail at
+    /// the removed sample itself.
+    fn some_triangle_holds(&self, v: u32, ring: &[u32], z: f64) -> bool {
+        let p = self.points[v as usize];
+        // Generous by far more than f64 rounding: this only spares scans.
+        let limit = self.limit + 1e-6 * (1.0 + z.abs() + self.limit);
+        let k = ring.len();
+        for i in 0..k {
+            let a = self.points[ring[i] as usize];
+            for j in i + 1..k {
+                let b = self.points[ring[j] as usize];
+                let ab = orient(a, b, p);
+                for l in j + 1..k {
+                    let c = self.points[ring[l] as usize];
+                    let (bc, ca) = (orient(b, c, p), orient(c, a, p));
+                    let area = ab + bc + ca;
+                    // Inside or on an edge: every sub-area of one sign (the mesh's winding
+                    // either way round, as the triple is not ordered).
+                    let inside = (ab <= 0 && bc <= 0 && ca <= 0) || (ab >= 0 && bc >= 0 && ca >= 0);
+                    if area == 0 || !inside {
+                        continue;
+                    }
+                    let h = |x: u32| self.position(x)[2];
+                    let at =
+                        (bc as f64 * h(ring[i]) + ca as f64 * h(ring[j]) + ab as f64 * h(ring[l]))
+                            / area as f64;
+                    if (at - z).abs() <= limit {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
     }
 
     /// Triangulates the polygon `ring` into `scratch.new_tris`, cheapest ear first; false if
@@ -328,4 +383,39 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 fn len(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::adaptive::decimate::insert;
+    use crate::adaptive::test_grids::{random, rough};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        /// The test before the ears only spares work: every removal it refuses would have
+        /// failed, so the meshes are the same.
+        #[test]
+        fn refusing_removals_early_changes_no_mesh(
+            k in 2u32..=6,
+            seed in any::<u32>(),
+            smooth in any::<bool>(),
+            max_error in 0.0f64..20.0,
+            relief in 0.0f32..300.0,
+        ) {
+            // White noise (few removals succeed) or ridges (many do).
+            let grid = if smooth {
+                rough((1 << k) + 1, seed % 1000, 10.0 * relief)
+            } else {
+                random(k, u64::from(seed), relief)
+            };
+            let options = DecimateOptions::new(max_error);
+            let scanner = Scanner::new(&grid, max_error as f32);
+            let (points, triangles) = insert::refine(&scanner);
+            let quick = remove_vertices_with(&scanner, &points, triangles.clone(), &options, true);
+            let slow = remove_vertices_with(&scanner, &points, triangles, &options, false);
+            prop_assert_eq!(quick, slow);
+        }
+    }
 }
