@@ -174,7 +174,9 @@ impl GlobeBuilder {
         self
     }
 
-    /// Tiles uploaded to the GPU per frame at most (default 24).
+    /// Tiles uploaded to the GPU per frame at most (default 24), for frames of 60 fps or
+    /// faster; a slower frame reported to [`crate::Globe::frame_time`] may upload as many as
+    /// the 60 fps frames in its time (at most 16 times as many).
     pub fn uploads_per_frame(&mut self, n: u32) -> &mut Self {
         self.uploads_per_frame = n;
         self

@@ -139,6 +139,9 @@ pub struct Globe {
     plan: FramePlan,
     lighting: Option<Lighting>,
     relax_detail: bool,
+    /// How many frames of [`UPLOAD_PACE_FPS`] the last reported frame lasted (1 to
+    /// [`MOST_UPLOAD_FRAMES`]): its uploads may be as many as theirs.
+    upload_frames: f64,
     /// The error bound under frame-time feedback, with a target frame rate.
     quality: Option<QualityLoop>,
     request_lookahead_frames: f64,
@@ -254,6 +257,7 @@ impl Globe {
                 .map(|total| total / SOFTWARE_TRIANGLE_SHARE / SOFTWARE_BYTES_PER_TRIANGLE),
             last_triangles: 0,
             relax_detail: true,
+            upload_frames: 1.0,
             quality: settings.quality.map(QualityLoop::new),
             request_lookahead_frames: settings.request_lookahead_frames,
             last_eye: None,
@@ -520,7 +524,7 @@ impl Globe {
             },
         };
         self.camera = Some(camera);
-        self.renderer.pool_mut().begin_frame();
+        self.renderer.pool_mut().begin_frame_of(self.upload_frames);
 
         // Select.
         let started = Instant::now();
@@ -620,11 +624,20 @@ impl Globe {
     /// Reports how long the last frame took, seconds (from one frame's start to the next's,
     /// as a viewer measures it). With a target frame rate ([`GlobeBuilder::target_fps`]) the
     /// error bound of the next frames follows: coarser while frames are slower than the
-    /// target, finer again with headroom. Without one it does nothing.
+    /// target, finer again with headroom. And a frame slower than 60 fps may upload as many
+    /// tiles as the 60 fps frames in its time would have ([`GlobeBuilder::uploads_per_frame`]
+    /// each, up to 16 times as many): on a software rasteriser, where a frame takes a second,
+    /// 24 uploads a frame left most tiles that arrived during a dive waiting until the view
+    /// had left them.
     pub fn frame_time(&mut self, seconds: f64) {
         if let Some(q) = self.quality.as_mut() {
             q.record(seconds);
         }
+        self.upload_frames = if seconds.is_finite() {
+            (seconds * UPLOAD_PACE_FPS).clamp(1.0, MOST_UPLOAD_FRAMES)
+        } else {
+            1.0
+        };
     }
 
     /// The frame-time loop, with a target frame rate: its bound and smoothed frame time.
@@ -861,6 +874,11 @@ impl Globe {
         report
     }
 }
+
+/// The frame rate [`GlobeBuilder::uploads_per_frame`] is meant for.
+const UPLOAD_PACE_FPS: f64 = 60.0;
+/// A slow frame uploads at most this many times [`GlobeBuilder::uploads_per_frame`].
+const MOST_UPLOAD_FRAMES: f64 = 16.0;
 
 /// The ECEF point of a geodetic position with its height raised by `exaggeration`.
 pub(crate) fn exaggerated(ellipsoid: &Ellipsoid, exaggeration: f64, at: Cartographic) -> DVec3 {

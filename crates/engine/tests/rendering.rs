@@ -885,9 +885,22 @@ fn live_frames_after_a_complete_load_upload_and_relax_as_configured() {
     // Elsewhere, with every requested tile arrived before the next frame: uploads alone
     // hold the frames back, 2 at a time.
     let other = camera(-100.0, 40.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let uploads = uploads_until_complete(&mut off, &other, None);
+    assert!(
+        uploads.iter().all(|&n| n <= 2) && uploads.contains(&2),
+        "tiles uploaded per live frame, 2 configured: {uploads:?}"
+    );
+}
+
+/// Tiles uploaded per frame until `view` is complete (at most 200 frames), every tile
+/// requested arriving before the next frame; each frame reported as lasting `frame_s`.
+fn uploads_until_complete(off: &mut Headless, view: &View, frame_s: Option<f64>) -> Vec<u32> {
     let mut uploads = Vec::new();
     for _ in 0..200 {
-        let report = off.update(&other);
+        if let Some(s) = frame_s {
+            off.globe_mut().frame_time(s);
+        }
+        let report = off.update(view);
         uploads.push(report.pool.uploaded_this_frame);
         if report.is_complete() {
             break;
@@ -899,8 +912,29 @@ fn live_frames_after_a_complete_load_upload_and_relax_as_configured() {
                 .wait_for_tiles(Duration::from_millis(50));
         }
     }
+    uploads
+}
+
+/// A frame reported slower than 60 fps uploads as many tiles as the 60 fps frames in its
+/// time would have: a tenth of a second is 6 frames, 12 uploads at 2 a frame.
+#[test]
+fn a_slow_frame_uploads_what_the_frames_in_its_time_would_have() {
+    let (w, h) = (320, 180);
+    let mut builder = GlobeBuilder::new();
+    builder.uploads_per_frame(2);
+    let mut off = Headless::new(&builder, w, h).expect("a GPU or lavapipe");
+    let view = camera(-100.0, 40.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let uploads = uploads_until_complete(&mut off, &view, Some(0.1));
+    let most = uploads.iter().copied().max().unwrap_or(0);
+    assert!(
+        most > 2 && most <= 12,
+        "tiles uploaded per 0.1 s frame, 2 per 60 fps frame: {uploads:?}"
+    );
+    // Reported at 60 fps or faster, frames keep to the configured 2.
+    let elsewhere = camera(60.0, -20.0, 300_000.0, 0.0, -90.0, false).view(off.globe(), 60.0, w, h);
+    let uploads = uploads_until_complete(&mut off, &elsewhere, Some(0.005));
     assert!(
         uploads.iter().all(|&n| n <= 2) && uploads.contains(&2),
-        "tiles uploaded per live frame, 2 configured: {uploads:?}"
+        "tiles uploaded per 5 ms frame: {uploads:?}"
     );
 }

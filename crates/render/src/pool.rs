@@ -375,6 +375,8 @@ pub struct TilePool {
     residency: Residency,
     options: TilePoolOptions,
     stats: PoolStats,
+    /// Uploads this frame may make ([`TilePool::begin_frame_of`]).
+    upload_allowance: u32,
 }
 
 const MIP_LEVELS: u32 = COLOUR_SIZE.ilog2() + 1;
@@ -466,6 +468,7 @@ impl TilePool {
             colour_texture,
             colour_view,
             residency: Residency::new(slots, vertices, indices),
+            upload_allowance: options.uploads_per_frame,
             options,
             stats: PoolStats {
                 capacity: slots,
@@ -479,8 +482,19 @@ impl TilePool {
 
     /// Starts a frame: resets the upload budget.
     pub fn begin_frame(&mut self) {
+        self.begin_frame_of(1.0);
+    }
+
+    /// Starts a frame that stands for `frames` frames' time (at least 1): it may upload as
+    /// many tiles as they would have together. A frame ten times longer than the ones the
+    /// limit was set for pays the same share of its time for uploads, instead of leaving
+    /// tiles that arrived meanwhile waiting until the view has left them.
+    pub fn begin_frame_of(&mut self, frames: f64) {
         self.residency.begin_frame();
         self.stats.uploaded_this_frame = 0;
+        let allowance = f64::from(self.options.uploads_per_frame) * frames.max(1.0);
+        // `as` saturates: u32::MAX (no limit) stays so.
+        self.upload_allowance = allowance as u32;
     }
 
     /// How many tiles may be uploaded per frame.
@@ -515,7 +529,7 @@ impl TilePool {
 
     /// Whether another upload fits in this frame's budget.
     pub fn can_upload(&self) -> bool {
-        self.stats.uploaded_this_frame < self.options.uploads_per_frame
+        self.stats.uploaded_this_frame < self.upload_allowance
     }
 
     /// Where `key` reads its colour (see [`Residency::colour_source`]).
