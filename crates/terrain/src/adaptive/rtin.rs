@@ -24,10 +24,17 @@
 //! their children's midpoints. Refining every triangle whose midpoint value exceeds
 //! `max_error` then gives a conforming mesh (both triangles sharing a hypotenuse split
 //! together, and a triangle only splits when its parent did) whose error is at most
-//! `max_error`: the errors are computed in f32, so the mesh is cut at `max_error` less the
-//! rounding those computations can make for the grid's largest height (8 ulps of it: 5e-4 m
-//! for Earth's relief, 0.8 m for the 1.6e6 m a wrong encoding decodes), and the bound holds
-//! whatever the heights. Each level costs about one pass over the
+//! `max_error`. The errors are computed in f32. On heights on a fine enough binary lattice
+//! (whole metres over up to 2,048 m of relief in a 513-sample tile; see [`on_exact_lattice`])
+//! they are exact, measured from the lowest sample. Otherwise f32 can round them by up to 8
+//! ulps of the grid's largest height (5e-4 m for Earth's relief, 0.8 m for the 1.6e6 m a wrong
+//! encoding decodes): a stored value that far or further below the bound keeps its triangles,
+//! one that far above splits them, and one in between is settled exactly, in f64 over the
+//! samples of the triangles it stands for (see [`MeshBuilder::exactly_beyond`]). Whole-metre
+//! heights such as SRTM's put many errors exactly on a whole-metre bound: cut at the bound
+//! less the rounding, as before, the srtm window of `tools/compare-meshers.py` took 251,607
+//! triangles at 1 m where 213,983 hold it exactly; settling all 18,865 of its values on the
+//! bound in f64 took 40 % longer than the lattice's exact f32. Each level costs about one pass over the
 //! grid (samples on a triangle's legs are left to its children, which hold them against the
 //! same line); how the passes are vectorised is in [`levels`]. Figures against martini:
 //! `tools/compare-meshers.py`, summarised in the README.
@@ -43,8 +50,10 @@ pub struct Rtin {
     side: usize,
     /// Per sample: the refinement error stored at it as a hypotenuse midpoint (0 at corners).
     errors: Vec<f32>,
-    /// How far the stored errors may be below the true ones from f32 rounding, metres.
+    /// How far the stored errors may be from the true ones from f32 rounding, metres.
     rounding_m: f32,
+    /// The grid's heights, for errors within rounding of a bound.
+    heights: Vec<f32>,
 }
 
 impl Rtin {
@@ -59,6 +68,7 @@ impl Rtin {
             side: grid.side(),
             errors: Vec::new(),
             rounding_m: 0.0,
+            heights: Vec::new(),
         };
         rtin.rebuild(grid, scratch);
         rtin
@@ -67,14 +77,29 @@ impl Rtin {
     /// Replaces this hierarchy by the one of `grid`, reusing its memory and `scratch`'s.
     pub fn rebuild(&mut self, grid: &HeightGrid, scratch: &mut RtinScratch) {
         self.side = grid.side();
+        let heights = grid.heights();
+        let (lowest, highest) = heights
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(h), hi.max(h))
+            });
+        self.heights.clear();
+        if on_exact_lattice(heights, lowest, highest, self.side) {
+            // Measured from the lowest sample (exactly: both are on the lattice), every
+            // value the passes compute is exact in f32.
+            self.heights.extend(heights.iter().map(|h| h - lowest));
+            self.rounding_m = 0.0;
+        } else {
+            self.heights.extend_from_slice(heights);
+            let largest = heights.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+            self.rounding_m = 8.0 * f32::EPSILON * largest;
+        }
         levels::errors(
-            grid.heights(),
+            &self.heights,
             self.side,
             &mut scratch.levels,
             &mut self.errors,
         );
-        let highest = grid.heights().iter().fold(0.0f32, |m, h| m.max(h.abs()));
-        self.rounding_m = 8.0 * f32::EPSILON * highest;
     }
 
     /// Makes every mesh keep the samples `keep(x, y)` names (grid columns and rows), and
@@ -177,19 +202,39 @@ impl Rtin {
         let n = (side - 1) as u16;
         // Every entry is u32::MAX between calls: only the entries of used vertices are
         // written, and they are put back below.
-        let index_of = &mut scratch.index_of;
+        let RtinScratch {
+            index_of, settled, ..
+        } = scratch;
         if index_of.len() != side * side {
             index_of.clear();
             index_of.resize(side * side, u32::MAX);
         }
+        settled.reset(side * side);
+        // Stored errors up to `keep` keep their triangles, those above `split` split them;
+        // in between they are settled exactly.
+        let (keep, split) = if max_error < 0.0 {
+            (max_error as f32, max_error as f32)
+        } else {
+            let rounding = f64::from(self.rounding_m);
+            let (low, high) = ((max_error - rounding).max(0.0), max_error + rounding);
+            // Rounded outwards, so that only stored values in the band are settled in f64.
+            let (mut keep, mut split) = (low as f32, high as f32);
+            if f64::from(keep) > low {
+                keep = keep.next_down();
+            }
+            if f64::from(split) < high {
+                split = split.next_up();
+            }
+            (keep, split)
+        };
         let mut builder = MeshBuilder {
             side,
             errors: &self.errors,
-            max_error: if max_error < 0.0 {
-                max_error as f32
-            } else {
-                (max_error as f32 - self.rounding_m).max(0.0)
-            },
+            heights: &self.heights,
+            max_error,
+            keep,
+            split,
+            settled,
             max_leg: max_leg.max(1),
             index_of,
             mesh,
@@ -205,6 +250,33 @@ impl Rtin {
     }
 }
 
+/// Whether the error passes of [`levels`] compute exactly in f32 on these heights: all on one
+/// binary lattice (multiples of `2^-q` m: whole metres, Terrarium's 1/256 m) fine enough
+/// that, measured from the lowest sample, `relief * 2^q * (side - 1) <= 2^20`. The passes'
+/// values are then multiples of `2^-q / (side - 1)` no larger than 16 times the relief
+/// (slopes times offsets, partial sums of three weighted corners), which f32's 24-bit
+/// significand holds exactly. Whole-metre heights qualify up to 2,048 m of relief in a
+/// 513-sample tile; the errors then need no settling near the bound.
+fn on_exact_lattice(heights: &[f32], lowest: f32, highest: f32, side: usize) -> bool {
+    let relief = f64::from(highest) - f64::from(lowest);
+    if !relief.is_finite() || side < 2 {
+        return false;
+    }
+    if relief == 0.0 {
+        return true;
+    }
+    // The finest lattice allowed: 2^q with relief * 2^q * n <= 2^20.
+    let q = ((1u64 << 20) as f64 / (relief * (side - 1) as f64))
+        .log2()
+        .floor();
+    if !(-60.0..=60.0).contains(&q) {
+        return false;
+    }
+    let scale = 2f32.powi(q as i32);
+    // A power-of-two scale is exact; any f32 from 2^23 up is a whole number.
+    heights.iter().all(|&h| (h * scale).fract() == 0.0)
+}
+
 /// Buffers [`Rtin::build`] and [`Rtin::mesh_into`] keep from one grid to the next (a few
 /// times the grid's size): meshing many tiles with one scratch per thread spares the
 /// allocations and their page faults.
@@ -213,12 +285,59 @@ pub struct RtinScratch {
     levels: levels::Scratch,
     /// Per grid sample: its vertex index in the mesh being built, or u32::MAX.
     index_of: Vec<u32>,
+    /// Midpoints settled exactly by the mesh being built.
+    settled: Settled,
+}
+
+/// Per grid sample, whether its stored error, settled exactly, is beyond the bound (unknown
+/// until asked); only the samples asked are cleared for the next mesh.
+#[derive(Default)]
+struct Settled {
+    state: Vec<u8>,
+    asked: Vec<u32>,
+}
+
+impl Settled {
+    const UNKNOWN: u8 = 0;
+    const WITHIN: u8 = 1;
+    const BEYOND: u8 = 2;
+
+    fn reset(&mut self, samples: usize) {
+        if self.state.len() == samples {
+            for &m in &self.asked {
+                self.state[m as usize] = Self::UNKNOWN;
+            }
+        } else {
+            self.state.clear();
+            self.state.resize(samples, Self::UNKNOWN);
+        }
+        self.asked.clear();
+    }
+
+    fn get(&self, m: u32) -> Option<bool> {
+        match self.state[m as usize] {
+            Self::UNKNOWN => None,
+            s => Some(s == Self::BEYOND),
+        }
+    }
+
+    fn set(&mut self, m: u32, beyond: bool) {
+        self.state[m as usize] = if beyond { Self::BEYOND } else { Self::WITHIN };
+        self.asked.push(m);
+    }
 }
 
 struct MeshBuilder<'a> {
     side: usize,
     errors: &'a [f32],
-    max_error: f32,
+    heights: &'a [f32],
+    max_error: f64,
+    /// Stored errors at most this hold the bound.
+    keep: f32,
+    /// Stored errors above this break it.
+    split: f32,
+    /// Midpoints whose stored error lay between the two, settled exactly.
+    settled: &'a mut Settled,
     max_leg: u16,
     index_of: &'a mut [u32],
     mesh: &'a mut AdaptiveMesh,
@@ -231,7 +350,7 @@ impl MeshBuilder<'_> {
     /// a B triangle's children have half).
     fn split(&mut self, a: u32, b: u32, c: u32, leg: u16, diagonal: bool) {
         let m = (a + b) / 2;
-        if leg > 1 && (leg > self.max_leg || self.errors[m as usize] > self.max_error) {
+        if leg > 1 && (leg > self.max_leg || self.beyond(m)) {
             let leg = if diagonal { leg } else { leg / 2 };
             self.split(c, a, m, leg, !diagonal);
             self.split(b, c, m, leg, !diagonal);
@@ -239,6 +358,179 @@ impl MeshBuilder<'_> {
             let t = [self.vertex(a), self.vertex(b), self.vertex(c)];
             self.mesh.triangles.push(t);
         }
+    }
+
+    /// Whether the value stored at midpoint `m` is beyond the bound.
+    #[inline(always)]
+    fn beyond(&mut self, m: u32) -> bool {
+        let e = self.errors[m as usize];
+        if e <= self.keep {
+            false
+        } else if e > self.split {
+            true
+        } else {
+            self.exactly_beyond(m)
+        }
+    }
+
+    /// Whether the value stored at midpoint `m`, computed in f64, is beyond the bound: the
+    /// errors of the triangles it stands for (as [`levels`] builds it: an A(s) square's
+    /// centre the square's two halves, a side's midpoint the B(s) triangles on either side)
+    /// and the values at their children's midpoints. The f64 values are exact for heights
+    /// in whole metres or Terrarium's 1/256 m steps: every triangle's doubled area is a power
+    /// of two. Samples on a triangle's legs are measured too: against the same line, they
+    /// are part of a child's error, so they change nothing.
+    #[inline(never)]
+    fn exactly_beyond(&mut self, m: u32) -> bool {
+        if let Some(beyond) = self.settled.get(m) {
+            return beyond;
+        }
+        let side = self.side as u32;
+        let n = side - 1;
+        let (x, y) = (m % side, m / side);
+        let zeros = |v: u32| {
+            if v == 0 {
+                u32::BITS
+            } else {
+                v.trailing_zeros()
+            }
+        };
+        let (zx, zy) = (zeros(x), zeros(y));
+        let half = 1u32 << zx.min(zy);
+        let quarter = half / 2;
+        let at = |x: u32, y: u32| y * side + x;
+        let mut triangles: [Option<[u32; 3]>; 2] = [None; 2];
+        let mut children: [Option<u32>; 4] = [None; 4];
+        if zx == zy {
+            // The centre of the A(2 half) square with corner (x0, y0).
+            let (x0, y0, s) = (x - half, y - half, 2 * half);
+            let (nw, ne, sw, se) = (
+                at(x0, y0),
+                at(x0 + s, y0),
+                at(x0, y0 + s),
+                at(x0 + s, y0 + s),
+            );
+            let nw_se = (x0 / s + y0 / s).is_multiple_of(2);
+            triangles = if nw_se {
+                [Some([nw, sw, se]), Some([nw, ne, se])]
+            } else {
+                [Some([nw, ne, sw]), Some([ne, sw, se])]
+            };
+            children = [
+                Some(at(x, y0)),
+                Some(at(x, y0 + s)),
+                Some(at(x0, y)),
+                Some(at(x0 + s, y)),
+            ];
+        } else {
+            // The midpoint of a side, between the squares on either side of it; with
+            // (u, v) along and across the side.
+            let horizontal = zx < zy;
+            let point = |along: u32, across: u32| {
+                if horizontal {
+                    at(along, across)
+                } else {
+                    at(across, along)
+                }
+            };
+            let (u, v) = if horizontal { (x, y) } else { (y, x) };
+            let (a, b) = (point(u - half, v), point(u + half, v));
+            if v > 0 {
+                triangles[0] = Some([a, b, point(u, v - half)]);
+            }
+            if v < n {
+                triangles[1] = Some([a, b, point(u, v + half)]);
+            }
+            if quarter > 0 {
+                for (k, (du, up)) in [(false, true), (true, true), (false, false), (true, false)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if (up && v == 0) || (!up && v == n) {
+                        continue;
+                    }
+                    let cu = if du { u + quarter } else { u - quarter };
+                    let cv = if up { v - quarter } else { v + quarter };
+                    children[k] = Some(point(cu, cv));
+                }
+            }
+        }
+        let beyond = triangles
+            .into_iter()
+            .flatten()
+            .any(|t| self.triangle_beyond(t))
+            || children.into_iter().flatten().any(|c| self.beyond(c));
+        self.settled.set(m, beyond);
+        beyond
+    }
+
+    /// Whether some sample in or on triangle `t` (row-major sample indices) is further than
+    /// the bound from its plane, in f64: row by row over the samples the triangle covers.
+    /// Its doubled area is a power of two, so the plane's slopes are exact for heights on a
+    /// binary lattice (whole metres, Terrarium's 1/256 m).
+    fn triangle_beyond(&self, t: [u32; 3]) -> bool {
+        let side = self.side as i64;
+        let p = t.map(|v| (i64::from(v) % side, i64::from(v) / side));
+        let h = t.map(|v| f64::from(self.heights[v as usize]));
+        let [(ax, ay), (bx, by), (cx, cy)] = p;
+        let area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+        if area == 0 {
+            return false;
+        }
+        // h(x, y) = h_a + gx (x - ax) + gy (y - ay) through all three corners.
+        let (db, dc) = (h[1] - h[0], h[2] - h[0]);
+        let gx = (db * (cy - ay) as f64 - dc * (by - ay) as f64) / area as f64;
+        let gy = (dc * (bx - ax) as f64 - db * (cx - ax) as f64) / area as f64;
+        // The triangle's legs and hypotenuse run along the grid or at 45 degrees, so each
+        // edge crosses row y at a whole column: `x0 + step * y`. The inside of a sloping edge
+        // is to its right or left (`bounds_left`); a horizontal edge keeps the rows on its
+        // inner side.
+        let sign = area.signum();
+        let mut sloping = [(0i64, 0i64, false); 3];
+        let mut count = 0;
+        let (mut y_min, mut y_max) = (ay.min(by).min(cy), ay.max(by).max(cy));
+        for ((ux, uy), (vx, vy)) in [(p[0], p[1]), (p[1], p[2]), (p[2], p[0])] {
+            if vy == uy {
+                // Inside where sign * (vx - ux) * (y - uy) >= 0.
+                if sign * (vx - ux) > 0 {
+                    y_min = y_min.max(uy);
+                } else {
+                    y_max = y_max.min(uy);
+                }
+                continue;
+            }
+            debug_assert!(vx == ux || (vx - ux).abs() == (vy - uy).abs());
+            let step = (vx - ux) / (vy - uy);
+            // orient(u, v, (x, y)) grows with x when -(vy - uy) * sign > 0.
+            sloping[count] = (ux - step * uy, step, -(vy - uy) * sign > 0);
+            count += 1;
+        }
+        let (x_min, x_max) = (ax.min(bx).min(cx), ax.max(bx).max(cx));
+        for y in y_min..=y_max {
+            let (mut lo, mut hi) = (x_min, x_max);
+            for &(x0, step, bounds_left) in &sloping[..count] {
+                let x = x0 + step * y;
+                if bounds_left {
+                    lo = lo.max(x);
+                } else {
+                    hi = hi.min(x);
+                }
+            }
+            if lo > hi {
+                continue;
+            }
+            let start = h[0] + gy * (y - ay) as f64 + gx * (lo - ax) as f64;
+            let row = &self.heights[(y * side + lo) as usize..=(y * side + hi) as usize];
+            let mut worst = 0.0f64;
+            for (k, &v) in row.iter().enumerate() {
+                let d = (f64::from(v) - (start + gx * k as f64)).abs();
+                worst = if d > worst { d } else { worst };
+            }
+            if worst > self.max_error {
+                return true;
+            }
+        }
+        false
     }
 
     fn vertex(&mut self, p: u32) -> u32 {
@@ -459,6 +751,102 @@ mod tests {
             stored[index(m)] = stored[index(m)].max(value);
         }
         stored
+    }
+
+    /// Whole-metre heights put many errors exactly on a whole-metre bound. Those hold it and
+    /// keep their triangles: the mesh's vertices are the corners and exactly the midpoints
+    /// whose value, by the definition in f64, is beyond the bound (cut at the bound less
+    /// the f32 rounding, as before, the ones on it split too). Both ways to get there: errors
+    /// exact in f32 (heights on a fine enough lattice), and errors settled in f64 near the
+    /// bound (a spike of 100 km, whose relief leaves the f32 values rounded).
+    #[test]
+    fn errors_exactly_on_the_bound_keep_their_triangles() {
+        for (k, seed) in [(5u32, 3u32), (6, 11), (7, 5)] {
+            let side = (1usize << k) + 1;
+            for spike in [None, Some(1e5f32)] {
+                let mut heights: Vec<f32> = rough(side, seed, 40.0)
+                    .heights()
+                    .iter()
+                    .map(|h| h.round())
+                    .collect();
+                if let Some(spike) = spike {
+                    heights[side + 1] = spike;
+                }
+                let grid = HeightGrid::new(side, heights).expect("grid");
+                let reference = reference_errors(&grid);
+                let rtin = Rtin::new(&grid);
+                assert_eq!(rtin.rounding_m == 0.0, spike.is_none(), "{side}, {spike:?}");
+                let n = side - 1;
+                let corners = [0, n, n * side, n * side + n];
+                for bound in [1.0, 2.0, 3.0] {
+                    let on_bound = reference.iter().filter(|&&e| e == bound).count();
+                    assert!(on_bound > 0, "{side}: no error is exactly {bound}");
+                    let mesh = rtin.mesh(bound);
+                    let mut got: Vec<usize> = mesh
+                        .vertices
+                        .iter()
+                        .map(|&[x, y]| usize::from(y) * side + usize::from(x))
+                        .collect();
+                    got.sort_unstable();
+                    let want: Vec<usize> = (0..side * side)
+                        .filter(|&i| corners.contains(&i) || reference[i] > bound)
+                        .collect();
+                    let case = format!("{side} at {bound} m, spike {spike:?}");
+                    assert_eq!(got.len(), want.len(), "{case} ({on_bound} on it)");
+                    assert_eq!(got, want, "{case}");
+                    assert!(mesh.max_error(&grid) <= bound, "{case}");
+                }
+            }
+        }
+    }
+
+    /// Heights on a binary lattice as fine as [`on_exact_lattice`] allows (relief x 2^q x n
+    /// = 2^20: whole metres over 8,192 m, Terrarium's 1/256 m over 32 m, 4 m steps over
+    /// 262 km, above a datum far from zero) store exactly the errors of the definition, so
+    /// meshes need no rounding allowance; a lattice twice as fine does not qualify.
+    #[test]
+    fn errors_on_a_fine_enough_lattice_are_exact() {
+        let n = 128usize;
+        for (step, datum, seed) in [
+            (1.0f64, 0.0f64, 1u64),
+            (1.0, 2_000.0, 2),
+            (1.0 / 256.0, -430.0, 3),
+            (4.0, 1.0e5, 4),
+        ] {
+            let levels = (1u64 << 20) as f64 / n as f64;
+            let rough_grid = rough(n + 1, seed as u32, 1.0);
+            let noise = random(7, seed, 1.0);
+            // Half ridges, half noise (the noise's steepest slopes), spanning the full relief.
+            let mut heights: Vec<f64> = rough_grid
+                .heights()
+                .iter()
+                .zip(noise.heights())
+                .map(|(&r, &z)| (0.5 * f64::from(r) + 0.5 * (f64::from(z) + 0.5)) * levels)
+                .collect();
+            let (lo, hi) = heights
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
+            for v in &mut heights {
+                *v = ((*v - lo) / (hi - lo) * levels).round() * step + datum;
+            }
+            let grid =
+                HeightGrid::new(n + 1, heights.iter().map(|&v| v as f32).collect()).expect("grid");
+            let rtin = Rtin::new(&grid);
+            let case = format!("step {step} m over {datum} m");
+            assert_eq!(rtin.rounding_m, 0.0, "{case} should qualify");
+            let reference = reference_errors(&grid);
+            for (i, (&got, &want)) in rtin.errors().iter().zip(&reference).enumerate() {
+                assert_eq!(f64::from(got), want, "{case}: sample {i}");
+            }
+            // Half the step: the same relief on a lattice twice as fine.
+            let finer: Vec<f32> = heights
+                .iter()
+                .enumerate()
+                .map(|(i, &v)| (v + if i == 1 { step / 2.0 } else { 0.0 }) as f32)
+                .collect();
+            let finer = HeightGrid::new(n + 1, finer).expect("grid");
+            assert!(Rtin::new(&finer).rounding_m > 0.0, "{case}, halved");
+        }
     }
 
     /// The fast passes (directly, across squares, along rows) against the definition, on
