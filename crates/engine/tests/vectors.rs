@@ -203,13 +203,13 @@ fn a_draped_line_over_srtm_keeps_its_colour_and_width_from_100_km_to_50_m() {
     }
 }
 
-/// A translucent line is as strong where it crosses a drawn tile's midline as anywhere else:
-/// its pieces are kept by quadrant (so a tile drawn in part draws only its quadrants'), and
-/// the two runs meeting at a midline are cut square and abut instead of overlapping their
-/// round ends, which showed a darker dot at every crossing. (Where the line leaves a tile
-/// the ends are still drawn round: neighbours of other levels need not meet exactly.)
+/// A translucent line is as strong where it crosses a drawn tile's midline or border as
+/// anywhere else: its pieces are kept by quadrant (so a tile drawn in part draws only its
+/// quadrants'), and the two runs meeting at a midline, or at the border between two tiles,
+/// are cut square and abut instead of overlapping their round ends, which showed a darker dot
+/// at every crossing.
 #[test]
-fn a_translucent_line_has_no_dots_where_it_crosses_a_tiles_midline() {
+fn a_translucent_line_has_no_dots_where_it_crosses_a_tiles_midline_or_border() {
     let (w, h) = (480u32, 360u32);
     let (mut off, mut layer) = srtm_and_line(
         "translucent",
@@ -221,8 +221,8 @@ fn a_translucent_line_has_no_dots_where_it_crosses_a_tiles_midline() {
     let (img, bg) = with_and_without(&mut off, &view, &mut layer, "translucent_line");
     let globe = off.globe();
     let camera = *globe.camera().expect("a frame camera");
-    // Where the line crosses drawn tiles' edges (left out) and midlines, in screen x.
-    let (mut edges, mut midlines) = (Vec::new(), Vec::new());
+    // Where the line crosses drawn tiles' borders and midlines, in screen x.
+    let (mut borders, mut midlines) = (Vec::new(), Vec::new());
     let screen_x = |lon_rad: f64| {
         camera
             .project(on_ground(globe, lon_rad.to_degrees(), LINE_LAT))
@@ -234,58 +234,63 @@ fn a_translucent_line_has_no_dots_where_it_crosses_a_tiles_midline() {
         if lat < r.south || lat > r.north {
             continue;
         }
-        edges.extend([r.west, r.east].into_iter().filter_map(screen_x));
+        borders.extend([r.west, r.east].into_iter().filter_map(screen_x));
         if d.parts.is_all() {
             midlines.extend(screen_x((r.west + r.east) / 2.0));
         }
     }
-    let near = |xs: &[f64], x: f64| xs.iter().any(|&e| (e - x).abs() < 6.0);
-    let (mut plain, mut at_midlines) = (Vec::new(), Vec::new());
+    let near = |xs: &[f64], x: f64, px: f64| xs.iter().any(|&e| (e - x).abs() < px);
+    let (mut plain, mut at_midlines, mut at_borders) = (Vec::new(), Vec::new(), Vec::new());
     for s in 0..=4000 {
         let lon = 11.05 + 0.9 * f64::from(s) / 4000.0;
         let Some(px) = camera.project(on_ground(globe, lon, LINE_LAT)) else {
             continue;
         };
         let (x, y) = (px.x.floor() as i64, px.y.floor() as i64);
-        if x < 3 || y < 3 || x >= i64::from(w) - 3 || y >= i64::from(h) - 3 || near(&edges, px.x) {
+        if x < 3 || y < 3 || x >= i64::from(w) - 3 || y >= i64::from(h) - 3 {
             continue;
         }
         let c = coverage(&img, &bg, x, y, MAGENTA);
         if c.is_nan() {
             continue;
         }
-        if midlines.iter().any(|&m| (m - px.x).abs() < 1.5) {
+        if near(&midlines, px.x, 1.5) {
             at_midlines.push(c);
-        } else if !near(&midlines, px.x) {
+        } else if near(&borders, px.x, 1.5) {
+            at_borders.push(c);
+        } else if !near(&midlines, px.x, 6.0) && !near(&borders, px.x, 6.0) {
             plain.push(c);
         }
     }
     plain.sort_by(f64::total_cmp);
     let median = plain[plain.len() / 2];
-    let strongest = at_midlines.iter().copied().fold(0.0, f64::max);
+    let strongest = |cs: &[f64]| cs.iter().copied().fold(0.0, f64::max);
     eprintln!(
-        "{} tiles, {} midlines crossed; coverage {median:.3} along the line (p1 {:.3}, p99 {:.3}), \
-         at most {strongest:.3} over {} samples at midlines",
+        "{} tiles, {} midlines and {} borders crossed; coverage {median:.3} along the line \
+         (p1 {:.3}, p99 {:.3}), at most {:.3} over {} samples at midlines, {:.3} over {} at borders",
         globe.drawn_tiles().len(),
         midlines.len(),
+        borders.len(),
         plain[plain.len() / 100],
         plain[plain.len() * 99 / 100],
-        at_midlines.len()
+        strongest(&at_midlines),
+        at_midlines.len(),
+        strongest(&at_borders),
+        at_borders.len(),
     );
     assert!(
         plain.len() > 1_000 && (0.3..0.8).contains(&median),
         "{} samples, median coverage {median:.3}",
         plain.len()
     );
-    assert!(
-        at_midlines.len() >= 10,
-        "{} samples at midlines",
-        at_midlines.len()
-    );
-    assert!(
-        strongest < median + 0.08,
-        "coverage {strongest:.3} at a midline against {median:.3} along the line"
-    );
+    for (what, cs) in [("midline", &at_midlines), ("border", &at_borders)] {
+        assert!(cs.len() >= 10, "{} samples at {what}s", cs.len());
+        assert!(
+            strongest(cs) < median + 0.08,
+            "coverage {:.3} at a {what} against {median:.3} along the line",
+            strongest(cs)
+        );
+    }
 }
 
 /// Even-odd point-in-polygon on the file's own coordinates (no unwrapping: Natural Earth

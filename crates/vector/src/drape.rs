@@ -91,6 +91,9 @@ pub struct DrapedSegment {
     pub lift_m: [f64; 2],
     /// The tile's quadrant it lies in, 0 to 3 ([`Quadrants::index_of`]).
     pub quadrant: u8,
+    /// Whether the start and the end lie on the tile's border (where the line leaves the
+    /// tile and the neighbour's piece goes on).
+    pub on_border: [bool; 2],
 }
 
 /// A piece of a draped triangle: a triangle on one of the surface's triangles or skirt walls.
@@ -256,6 +259,7 @@ impl DrapeSurface {
                     along,
                     lift_m: [a.lift_m, b.lift_m],
                     quadrant: self.quadrants[k as usize],
+                    on_border: [on_unit_border(at(lo)), on_unit_border(at(hi))],
                 });
             }
         }
@@ -432,6 +436,12 @@ fn cell_span(lo: [f64; 2], hi: [f64; 2]) -> (usize, usize, usize, usize) {
 }
 
 /// The parameter interval of a..b inside the unit square (Liang-Barsky).
+/// Whether `p` (texture coordinates) lies on the unit square's border, up to rounding.
+fn on_unit_border(p: [f64; 2]) -> bool {
+    const EPS: f64 = 1e-9;
+    p.iter().any(|&c| c <= EPS || c >= 1.0 - EPS)
+}
+
 fn clip_to_unit(a: [f64; 2], b: [f64; 2]) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
     for d in 0..2 {
@@ -581,6 +591,17 @@ mod tests {
         let last = out[out.len() - 1].along[1];
         assert!((first - 0.2 / 1.5).abs() < 1e-9 && (last - 1.2 / 1.5).abs() < 1e-9);
         assert!(out[0].a.x.abs() < 1e-9 && (out[out.len() - 1].b.x - 1000.0).abs() < 1e-9);
+        // Only where it crosses the tile's border are its ends on the border (where the
+        // neighbour's piece goes on), not where pieces meet on the mesh's inner edges.
+        let ends: Vec<bool> = out.iter().flat_map(|p| p.on_border).collect();
+        let mut want = vec![false; ends.len()];
+        want[0] = true;
+        want[ends.len() - 1] = true;
+        assert_eq!(ends, want);
+        // A line that starts and ends inside the tile touches the border nowhere.
+        out.clear();
+        s.drape_line(&[[10.2, 50.3], [10.7, 50.6]], 0.0, &mut out);
+        assert!(out.iter().all(|p| p.on_border == [false, false]));
     }
 
     #[test]

@@ -961,8 +961,9 @@ impl TileDrape {
         let last = (kept.len() - 1) as f64;
         // Runs of pieces that meet end to end within one quadrant. Where a line crosses a
         // midline its run breaks into the next quadrant's, the two ends cut square and
-        // abutting (a seam); where pieces do not meet (the line leaves the tile and comes
-        // back), the ends are drawn round.
+        // abutting (a seam), and so where it crosses the tile's border, abutting the
+        // neighbour's run; where pieces do not meet inside the tile (a gap in the kept
+        // vertices), the ends are drawn round.
         let meets = |x: &DrapedSegment, y: &DrapedSegment| x.along[1] == y.along[0];
         let mut first = 0usize;
         for piece in segs.chunk_by(|x: &DrapedSegment, y| meets(x, y) && x.quadrant == y.quadrant) {
@@ -984,14 +985,14 @@ impl TileDrape {
             let run_ends = (
                 if starts && head.along[0] == 0.0 {
                     RunEnd::Line
-                } else if before.is_some_and(|b| meets(b, head)) {
+                } else if head.on_border[0] || before.is_some_and(|b| meets(b, head)) {
                     RunEnd::Seam
                 } else {
                     RunEnd::Break
                 },
                 if ends && tail.along[1] == last {
                     RunEnd::Line
-                } else if after.is_some_and(|a| meets(tail, a)) {
+                } else if tail.on_border[1] || after.is_some_and(|a| meets(tail, a)) {
                     RunEnd::Seam
                 } else {
                     RunEnd::Break

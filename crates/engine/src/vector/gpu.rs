@@ -137,11 +137,13 @@ impl LineLook {
 pub(crate) enum RunEnd {
     /// The line's own start or end: capped.
     Line,
-    /// The line goes on in a run drawn apart whose end meets this one exactly (a draped
-    /// line crossing a tile's midline): cut square, abutting it.
+    /// The line goes on in a run drawn apart whose end meets this one (a draped line
+    /// crossing a tile's midline, or its border, where the neighbour's run starts at the same
+    /// point of the border; a neighbour of another level keeps the line's vertices to its
+    /// own sub-pixel tolerance): cut square, abutting it.
     Seam,
-    /// The line goes on elsewhere, not necessarily meeting this end exactly (where it leaves
-    /// a tile or a chunk): drawn round.
+    /// The line goes on elsewhere, not necessarily meeting this end (where the vertices a
+    /// tile keeps leave a gap, or a chunk at altitude ends): drawn round.
     Break,
 }
 

@@ -6,8 +6,9 @@
 //!   it lies exactly on the terrain drawn this frame at whatever level; each tile's pieces
 //!   are computed once when it is first drawn and kept while it stays cached, by the quadrant
 //!   of the tile they lie in: a tile drawn over some quadrants only (beside finer children
-//!   while others load) draws those quadrants' pieces, and a line crossing a midline is cut
-//!   square on both sides there, so the two runs abut (translucent lines show no overlap). Fills are
+//!   while others load) draws those quadrants' pieces, and a line crossing a midline or a
+//!   tile's border is cut square on both sides there, so the two runs abut (translucent lines
+//!   show no overlap). Fills are
 //!   tested a hair nearer than their depth (they share the terrain's planes); lines and
 //!   points are screen-space quads (a segment reads its neighbours in the buffer for miter,
 //!   bevel or round joins; dashes follow metres along the line) whose visibility is decided
