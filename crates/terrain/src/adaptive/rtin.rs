@@ -34,10 +34,10 @@
 //! heights such as SRTM's put many errors exactly on a whole-metre bound: cut at the bound
 //! less the rounding, as before, the srtm window of `tools/compare-meshers.py` took 251,607
 //! triangles at 1 m where 213,983 hold it exactly; settling all 18,865 of its values on the
-//! bound in f64 took 40 % longer than the lattice's exact f32. Each level costs about one pass over the
-//! grid (samples on a triangle's legs are left to its children, which hold them against the
-//! same line); how the passes are vectorised is in [`levels`]. Figures against martini:
-//! `tools/compare-meshers.py`, summarised in the README.
+//! bound in f64 took 40 % longer than the lattice's exact f32. Each level costs about one
+//! pass over the grid (samples on a triangle's legs are left to its children, which hold them
+//! against the same line); how the passes are vectorised is in [`levels`]. Figures against
+//! martini: `tools/compare-meshers.py`, summarised in the README.
 
 use super::{AdaptiveMesh, HeightGrid};
 
@@ -91,7 +91,7 @@ impl Rtin {
             self.rounding_m = 0.0;
         } else {
             self.heights.extend_from_slice(heights);
-            let largest = heights.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+            let largest = lowest.abs().max(highest.abs());
             self.rounding_m = 8.0 * f32::EPSILON * largest;
         }
         levels::errors(
