@@ -61,6 +61,10 @@ pub struct FrameReport {
     /// CPU microseconds the render thread spent in selection (excludes time the thread was
     /// preempted by loaders or the software rasteriser on a busy machine).
     pub select_cpu_us: f64,
+    /// CPU microseconds the render thread spent in the whole [`Globe::update`]: selection,
+    /// load bookkeeping, uploads (morph targets included where the loader could not find
+    /// them) and the draw list. What a frame costs the CPU before the GPU draws it.
+    pub update_cpu_us: f64,
     /// Tiles wanted but not drawable yet (loading or uploading).
     pub wanted: u32,
     /// Data-side counters.
@@ -509,6 +513,7 @@ impl Globe {
     /// Runs one frame's CPU work and uploads for `view`: selection, the plan, data requests,
     /// GPU residency and the draw list. Then [`Globe::render`] draws it.
     pub fn update(&mut self, view: &View) -> FrameReport {
+        let update_started_cpu = cpu_time::ThreadTime::try_now().ok();
         let ellipsoid = self.ellipsoid();
         let eye = ellipsoid
             .ecef_to_cartographic(view.position)
@@ -585,6 +590,7 @@ impl Globe {
             selection: self.selection.stats,
             select_us,
             select_cpu_us,
+            update_cpu_us: update_started_cpu.map_or(f64::NAN, |t| t.elapsed().as_secs_f64() * 1e6),
             wanted: self.selection.requests.len() as u32,
             layer: layer_stats,
             pool: self.renderer.pool().stats(),

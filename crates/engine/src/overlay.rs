@@ -23,6 +23,8 @@
 //! [`FrameCamera::origin`] ([`FrameCamera::relative`]: subtracted in f64), and with
 //! [`FrameCamera::clip_from_eye`] they land exactly where the terrain under them is drawn.
 
+use std::borrow::Cow;
+
 use globus_geo::{Cartographic, DVec3, Ellipsoid};
 use globus_render::{FrameCamera, FrameFormats};
 use globus_stream::TerrainLayer;
@@ -131,7 +133,7 @@ impl FrameContext<'_> {
     /// Where the vertices of a loaded tile's mesh ([`FrameContext::tile_mesh`]) lie on its
     /// parent's surface, one per vertex (empty: it has none to grow out of): what draped
     /// geometry needs to follow the terrain's geomorphing.
-    pub fn tile_morph_targets(&self, key: TileKey) -> Vec<MorphVertex> {
+    pub fn tile_morph_targets(&self, key: TileKey) -> Cow<'_, [MorphVertex]> {
         crate::frame::upload::morph_targets(self.layer, key)
     }
 

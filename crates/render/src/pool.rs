@@ -150,6 +150,11 @@ pub struct ColourSource {
 #[derive(Clone, Debug)]
 pub struct Residency {
     slot_of: FxHashMap<TileKey, u32>,
+    /// Which of each parent's children are resident, one bit per child in the order of
+    /// `GLOBE_SCHEME.children(parent)`: LOD selection asks about a refined tile's children
+    /// together, and one probe of this map answers for all of them where four probes of
+    /// `slot_of` did (each a cache miss once the rasteriser has run between frames).
+    resident_children: FxHashMap<TileKey, u8>,
     slots: Vec<Option<Resident>>,
     free_slots: Vec<u32>,
     vertices: RangeAllocator,
@@ -162,6 +167,7 @@ impl Residency {
     pub fn new(slots: u32, vertices: u32, indices: u32) -> Self {
         Self {
             slot_of: FxHashMap::default(),
+            resident_children: FxHashMap::default(),
             slots: vec![None; slots as usize],
             free_slots: (0..slots).rev().collect(),
             vertices: RangeAllocator::new(vertices),
@@ -179,6 +185,32 @@ impl Residency {
     /// loaded tile it visits).
     pub fn contains(&self, key: TileKey) -> bool {
         self.slot_of.contains_key(&key)
+    }
+
+    /// Which of `parent`'s children are resident: bit `i` for the `i`-th of
+    /// `GLOBE_SCHEME.children(parent)` (one lookup for all of them).
+    pub fn resident_children(&self, parent: TileKey) -> u8 {
+        self.resident_children.get(&parent).copied().unwrap_or(0)
+    }
+
+    /// Records `key`'s residency in its parent's bits (roots and keys off the engine's
+    /// grid have none: [`Residency::contains`] answers for them).
+    fn mark_child(&mut self, key: TileKey, resident: bool) {
+        let Some(parent) = GLOBE_SCHEME.parent(key) else {
+            return;
+        };
+        let Some(i) = GLOBE_SCHEME.children(parent).position(key) else {
+            return;
+        };
+        let bit = 1u8 << i;
+        if resident {
+            *self.resident_children.entry(parent).or_insert(0) |= bit;
+        } else if let Some(bits) = self.resident_children.get_mut(&parent) {
+            *bits &= !bit;
+            if *bits == 0 {
+                self.resident_children.remove(&parent);
+            }
+        }
     }
 
     /// The resident tile `key`.
@@ -320,6 +352,7 @@ impl Residency {
         };
         self.slots[slot as usize] = Some(resident.clone());
         self.slot_of.insert(key, slot);
+        self.mark_child(key, true);
         Some(resident)
     }
 
@@ -338,6 +371,7 @@ impl Residency {
             .min_by_key(|&(_, rank)| rank)?;
         let victim = self.slots[index].take()?;
         self.slot_of.remove(&victim.key);
+        self.mark_child(victim.key, false);
         self.free_slots.push(victim.slot);
         self.vertices.free(victim.vertices);
         self.indices.free(victim.indices);
@@ -728,6 +762,58 @@ mod tests {
         assert_eq!(evicted, vec![key(1)]);
         assert!(r.get(key(1)).is_none() && r.get(key(0)).is_some());
         assert_eq!(r.len(), 3);
+    }
+
+    #[test]
+    fn a_parents_resident_children_follow_placements_and_evictions() {
+        // Every child of a few parents (wide polar ones with two children among them), in
+        // pools too small to hold them all: the bits must agree with `contains` throughout.
+        // A parent whose children span its row in fewer than four tiles.
+        let narrow = (1..8)
+            .flat_map(|level| (0..1u32 << level).map(move |y| (level, y)))
+            .filter_map(|(level, y)| GLOBE_SCHEME.key(level, 0, y))
+            .find(|&k| GLOBE_SCHEME.children(k).len() < 4)
+            .expect("a polar parent with fewer children");
+        let parents = [
+            TileKey::new(0, 0, 0),
+            TileKey::new(3, 5, 2),
+            GLOBE_SCHEME.tile_at(-2.0, -1.54, 7).expect("a tile"),
+            narrow,
+        ];
+        let children: Vec<TileKey> = parents
+            .iter()
+            .flat_map(|&p| GLOBE_SCHEME.children(p).to_vec())
+            .collect();
+        assert!(
+            children.len() < 4 * parents.len(),
+            "no polar parent: {children:?}"
+        );
+        let mut r = Residency::new(5, 10_000, 10_000);
+        let mut evicted = Vec::new();
+        let mut seed = 7u64;
+        for round in 0..200 {
+            r.begin_frame();
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let child = children[(seed >> 33) as usize % children.len()];
+            if round % 3 == 0 {
+                r.touch(child);
+            } else {
+                r.place(child, 100, 300, DVec3::ZERO, &mut evicted);
+            }
+            for &p in &parents {
+                let bits = r.resident_children(p);
+                for (i, &c) in GLOBE_SCHEME.children(p).iter().enumerate() {
+                    assert_eq!(bits & (1 << i) != 0, r.contains(c), "round {round}: {c:?}");
+                }
+                assert_eq!(bits >> GLOBE_SCHEME.children(p).len(), 0);
+            }
+        }
+        assert!(!evicted.is_empty());
+        // Roots have no parent's bits; `contains` answers for them.
+        r.place(TileKey::new(0, 1, 0), 100, 300, DVec3::ZERO, &mut evicted);
+        assert!(r.contains(TileKey::new(0, 1, 0)));
     }
 
     #[test]

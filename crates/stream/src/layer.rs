@@ -32,6 +32,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use crate::colour_jobs::{ColourChannel, Failures, MAX_REMEMBERED_KEYS};
 use crate::nodes::NodeTable;
 use crate::scheduler::Outcome;
+use crate::terrain_jobs::TerrainJobs;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
 
 /// While waiting for terrain tiles, colour arrivals are looked for this often.
@@ -139,7 +140,9 @@ pub enum TileColour<'a> {
 
 /// A terrain layer: scheduler, cache and oracle over any [`TerrainSource`].
 pub struct TerrainLayer {
-    scheduler: Scheduler<dyn TerrainSource>,
+    /// The loads, with the parents their morph targets need ([`TerrainJobs`]).
+    jobs: Arc<TerrainJobs>,
+    scheduler: Scheduler<TerrainJobs>,
     cache: LruCache<Cached>,
     /// Separate colour loads, started with the first tile that needs one.
     colours: Option<ColourChannel>,
@@ -166,8 +169,10 @@ impl TerrainLayer {
         let occluder = *source.occluder();
         let height_range_m = source.height_range_m();
         let max_level = source.max_level();
+        let jobs = Arc::new(TerrainJobs::new(source));
         let mut layer = Self {
-            scheduler: Scheduler::new(source, options.workers),
+            scheduler: Scheduler::new(Arc::clone(&jobs), options.workers),
+            jobs,
             cache: LruCache::new(options.cache_bytes),
             colours: None,
             workers: options.workers,
@@ -210,7 +215,7 @@ impl TerrainLayer {
 
     /// The source.
     pub fn source(&self) -> &Arc<dyn TerrainSource> {
-        self.scheduler.source()
+        self.jobs.source()
     }
 
     /// A loaded tile.
@@ -315,6 +320,11 @@ impl TerrainLayer {
                 .filter(|r| !self.cache.contains(r.key) && !self.no_data.contains(&r.key))
                 .copied()
                 .collect();
+            // Their loaded parents, for the morph targets the loads compute.
+            self.jobs.set_parents(missing.iter().filter_map(|r| {
+                let parent = GLOBE_SCHEME.parent(r.key)?;
+                Some((parent, Arc::clone(&self.cache.get(parent)?.data)))
+            }));
             self.scheduler.submit(&missing);
         }
         stats.loading = self.loading() as u32;
@@ -354,7 +364,7 @@ impl TerrainLayer {
         if requests.is_empty() && self.colours.is_none() {
             return;
         }
-        let source = Arc::clone(self.scheduler.source());
+        let source = Arc::clone(self.jobs.source());
         let workers = self.workers;
         self.colours
             .get_or_insert_with(|| ColourChannel::new(source, workers))
@@ -595,6 +605,47 @@ mod tests {
                 workers,
             },
         )
+    }
+
+    /// Asks for `key` until it is loaded.
+    fn load(layer: &mut TerrainLayer, key: TileKey) -> Arc<TerrainData> {
+        let wanted = [TileRequest { key, priority: 1.0 }];
+        for _ in 0..200 {
+            if let Some(data) = layer.get(key) {
+                return Arc::clone(data);
+            }
+            layer.update(&[], &[], &wanted);
+            layer.wait_for_tiles(Duration::from_millis(50));
+        }
+        panic!("{key} did not load");
+    }
+
+    #[test]
+    fn tiles_arrive_with_their_morph_targets_found_on_the_loader_thread() {
+        let mut layer = procedural_layer(8, 1 << 30, 1);
+        let root = TileKey::new(0, 1, 0);
+        let root_data = load(&mut layer, root);
+        // A root has no parent to grow out of.
+        assert!(root_data.morph.is_empty());
+        // A child asked for while its parent is loaded comes with its targets, the ones
+        // the parent's mesh gives.
+        let mut parent = (root, root_data);
+        for level in 1..=4 {
+            let child = GLOBE_SCHEME.tile_at(0.13, 0.8, level).expect("a tile");
+            assert_eq!(GLOBE_SCHEME.parent(child), Some(parent.0));
+            let data = load(&mut layer, child);
+            let expected = globus_terrain::MorphVertex::towards_parent(
+                &data.tile,
+                &data.mesh,
+                &parent.1.tile,
+                &parent.1.mesh,
+                layer.ellipsoid(),
+            );
+            assert_eq!(data.morph.len(), data.mesh.vertices.len(), "{child}");
+            assert_eq!(data.morph, expected, "{child}");
+            assert!(data.morph.iter().any(|m| m.dh_m != 0.0), "{child}");
+            parent = (child, data);
+        }
     }
 
     #[test]

@@ -22,6 +22,7 @@ mod raster_terrain;
 mod refined;
 mod scheduler;
 mod source;
+mod terrain_jobs;
 
 pub use cache::LruCache;
 pub use layer::{LayerStats, TerrainLayer, TerrainLayerOptions, TileColour, UsageStats};

@@ -2,7 +2,7 @@
 
 use globus_geo::Ellipsoid;
 use globus_terrain::grid::MESH_SEGMENTS;
-use globus_terrain::{MeshOptions, TerrainTile, TileMesh};
+use globus_terrain::{MeshOptions, MorphVertex, TerrainTile, TileMesh};
 use globus_tiling::{GLOBE_SCHEME, TileBounds, TileKey, TilingScheme};
 
 use crate::fetch::Cancel;
@@ -126,6 +126,10 @@ pub struct TerrainData {
     /// geometry: `tile.colour` is only a one-texel stand-in (never drawn), and the renderer
     /// shows the nearest ancestor's colour, cropped and scaled, until the tile's own arrives.
     pub colour_separate: bool,
+    /// Where each of the mesh's vertices lies on the parent's surface (geomorphing), one per
+    /// vertex: filled by the layer's loader thread when the parent was loaded
+    /// (`MorphVertex::towards_parent`), empty otherwise. Sources leave it empty.
+    pub morph: Vec<MorphVertex>,
 }
 
 impl TerrainData {
@@ -147,12 +151,16 @@ impl TerrainData {
             child_bounds,
             generated: false,
             colour_separate: false,
+            morph: Vec::new(),
         }
     }
 
     /// Bytes held.
     pub fn byte_size(&self) -> usize {
-        self.tile.byte_size() + self.mesh.byte_size() + std::mem::size_of::<Self>()
+        self.tile.byte_size()
+            + self.mesh.byte_size()
+            + std::mem::size_of_val(self.morph.as_slice())
+            + std::mem::size_of::<Self>()
     }
 
     /// The error LOD selection should use, in drawn metres: the tile's

@@ -20,6 +20,7 @@ const MAX_FRAMES: usize = 1_000_000;
 struct FrameSample {
     select_us: f64,
     select_cpu_us: f64,
+    update_cpu_us: f64,
     frame_ms: f64,
     tiles_rendered: u32,
     nodes_visited: u32,
@@ -41,6 +42,7 @@ impl FrameSample {
         Self {
             select_us: r.select_us,
             select_cpu_us: r.select_cpu_us,
+            update_cpu_us: r.update_cpu_us,
             frame_ms,
             tiles_rendered: r.draw.tiles,
             nodes_visited: r.selection.nodes_visited,
@@ -58,16 +60,17 @@ impl FrameSample {
         }
     }
 
-    const CSV_HEADER: &str = "t_s,frame_ms,select_us,select_cpu_us,tiles_rendered,drawn_in_part,\
+    const CSV_HEADER: &str = "t_s,frame_ms,select_us,select_cpu_us,update_cpu_us,tiles_rendered,drawn_in_part,\
         nodes_visited,nodes_culled,draw_calls,triangles,wanted_not_drawable,\
         showing_ancestor_imagery,sse_bound_px,arrived,loading,evicted,requests_deferred";
 
     fn csv_row(&self, t: f64) -> String {
         format!(
-            "{t:.3},{:.3},{:.1},{:.1},{},{},{},{},{},{},{},{},{:.4},{},{},{},{}",
+            "{t:.3},{:.3},{:.1},{:.1},{:.1},{},{},{},{},{},{},{},{},{:.4},{},{},{},{}",
             self.frame_ms,
             self.select_us,
             self.select_cpu_us,
+            self.update_cpu_us,
             self.tiles_rendered,
             self.drawn_in_part,
             self.nodes_visited,
@@ -242,6 +245,7 @@ pub fn run(
         "draw_calls": column(|s| f64::from(s.draw_calls)),
         "triangles": column(|s| s.triangles as f64),
         "select_cpu_us": column(|s| s.select_cpu_us),
+        "update_cpu_us": column(|s| s.update_cpu_us),
         "tiles_wanted_not_drawable": column(|s| f64::from(s.tiles_wanted_not_drawable)),
         "tiles_showing_ancestor_imagery": column(|s| f64::from(s.tiles_showing_ancestor_imagery)),
         "nodes_visited_per_tile": per_tile(|s| s.nodes_visited),

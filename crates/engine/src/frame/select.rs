@@ -29,9 +29,14 @@ impl TileOracle for ResidentOracle<'_> {
 
     fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
         self.layer.child_tiles(parent, children, out);
-        for (info, &child) in out.iter_mut().zip(children) {
-            if let Some(info) = info {
-                self.resident_or_unloaded(child, info);
+        // The layer's children are the engine grid's, in its order: one lookup for all.
+        let resident = self.residency.resident_children(parent);
+        for (i, info) in out.iter_mut().enumerate() {
+            if let Some(info) = info
+                && info.state == TileState::Loaded
+                && resident & (1 << i) == 0
+            {
+                info.state = TileState::Unloaded;
             }
         }
     }

@@ -6,9 +6,12 @@
 //! scaled (a root is uploaded first if no ancestor has colour on the GPU), and its own colour
 //! follows when it arrives. Drawn tiles' colours go up before new tiles: they are on screen.
 //!
-//! A tile goes up with its morph targets on its parent's surface ([`MorphVertex`]), from the
-//! parent's heights in the CPU cache (a drawn tile's ancestors are in use, so they are
-//! there); without them (a root) it shows its own surface at once.
+//! A tile goes up with its morph targets on its parent's surface ([`MorphVertex`]), as the
+//! loader thread found them, or from the parent's mesh in the CPU cache (a drawn tile's
+//! ancestors are in use, so they are there); without them (a root) it shows its own surface
+//! at once.
+
+use std::borrow::Cow;
 
 use globus_render::TilePool;
 use globus_stream::{TerrainLayer, TileColour};
@@ -119,21 +122,25 @@ fn colour_to_borrow(
     }
 }
 
-/// Where the vertices of a loaded tile's mesh lie on its parent's surface, from the parent's
-/// data in the CPU cache; empty for roots, tiles not loaded, or a parent gone from the cache
-/// (the tile then shows its own surface at once).
-pub(crate) fn morph_targets(layer: &TerrainLayer, key: TileKey) -> Vec<MorphVertex> {
-    let (Some(data), Some(parent)) = (
-        layer.get(key),
-        GLOBE_SCHEME.parent(key).and_then(|p| layer.get(p)),
-    ) else {
-        return Vec::new();
+/// Where the vertices of a loaded tile's mesh lie on its parent's surface: as its loader
+/// thread found them ([`globus_stream::TerrainData::morph`]), else from the parent's data in
+/// the CPU cache; empty for roots, tiles not loaded, or a parent gone from the cache (the
+/// tile then shows its own surface at once).
+pub(crate) fn morph_targets(layer: &TerrainLayer, key: TileKey) -> Cow<'_, [MorphVertex]> {
+    let Some(data) = layer.get(key) else {
+        return Cow::Borrowed(&[]);
     };
-    MorphVertex::towards_parent(
+    if data.morph.len() == data.mesh.vertices.len() {
+        return Cow::Borrowed(&data.morph);
+    }
+    let Some(parent) = GLOBE_SCHEME.parent(key).and_then(|p| layer.get(p)) else {
+        return Cow::Borrowed(&[]);
+    };
+    Cow::Owned(MorphVertex::towards_parent(
         &data.tile,
         &data.mesh,
         &parent.tile,
         &parent.mesh,
         layer.ellipsoid(),
-    )
+    ))
 }
