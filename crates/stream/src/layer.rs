@@ -309,6 +309,8 @@ impl TerrainLayer {
         // A hard budget: while what is in use does not fit, load nothing more (the engine
         // lowers detail until it does); otherwise replace the wanted list.
         if self.cache.is_over_budget() {
+            // Nor hold on to parents the cache may have given up.
+            self.jobs.set_parents([]);
             self.scheduler.submit(&[]);
             self.request_colours(&[], &[]);
         } else {
