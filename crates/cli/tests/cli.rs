@@ -346,15 +346,25 @@ fn bench_holds_a_target_frame_rate_by_raising_the_bound_within_its_range() {
     let text = std::fs::read_to_string(&csv).expect("the frames CSV");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
-    let column = header
-        .iter()
-        .position(|&c| c == "sse_bound_px")
-        .expect("an sse_bound_px column");
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|&c| c == name)
+            .unwrap_or_else(|| panic!("a {name} column"))
+    };
+    let (bound, select, update) = (
+        column("sse_bound_px"),
+        column("select_cpu_us"),
+        column("update_cpu_us"),
+    );
     let bounds: Vec<f64> = lines
         .map(|l| {
             let cells: Vec<&str> = l.split(',').collect();
             assert_eq!(cells.len(), header.len(), "{l}");
-            cells[column].parse().expect("a number")
+            let number = |i: usize| -> f64 { cells[i].parse().expect("a number") };
+            // The frame's whole update includes its selection.
+            assert!(number(update) >= number(select), "{l}");
+            number(bound)
         })
         .collect();
     assert_eq!(bounds.len(), 181);
