@@ -795,6 +795,18 @@ mod tests {
         assert_eq!(r.len(), 3);
     }
 
+    /// A fixed pseudo-random sequence from `seed`: each call gives a number below its
+    /// argument.
+    fn below(seed: u64) -> impl FnMut(u64) -> u64 {
+        let mut state = seed;
+        move |n| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) % n
+        }
+    }
+
     #[test]
     fn a_parents_resident_children_follow_placements_and_evictions() {
         // Every child of a few parents (wide polar ones with two children among them), in
@@ -821,13 +833,10 @@ mod tests {
         );
         let mut r = Residency::new(5, 10_000, 10_000);
         let mut evicted = Vec::new();
-        let mut seed = 7u64;
+        let mut next = below(7);
         for round in 0..200 {
             r.begin_frame();
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let child = children[(seed >> 33) as usize % children.len()];
+            let child = children[next(children.len() as u64) as usize];
             if round % 3 == 0 {
                 r.touch(child);
             } else {
@@ -854,13 +863,7 @@ mod tests {
         // recently used would pick one by one (levels 0-2 last, ties by slot).
         let mut r = Residency::new(24, 6_000, 18_000);
         let mut evicted = Vec::new();
-        let mut seed = 11u64;
-        let mut next = |n: u64| {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) % n
-        };
+        let mut next = below(11);
         let mut evictions = 0;
         for frame in 0..300 {
             r.begin_frame();
