@@ -144,6 +144,10 @@ pub struct GlobeArgs {
     /// and colour as they come into their level of detail: no popping).
     #[arg(long)]
     pub no_morph: bool,
+    /// March the air between the eye and every ground pixel (the reference, slower) instead
+    /// of reading the frame's aerial-perspective table.
+    #[arg(long)]
+    pub marched_haze: bool,
 }
 
 #[derive(Args)]
@@ -572,6 +576,7 @@ pub fn globe_builder(a: &GlobeArgs) -> anyhow::Result<GlobeBuilder> {
     }
     builder.fog(!a.no_fog);
     builder.morph(!a.no_morph);
+    builder.marched_haze(a.marched_haze);
     if let Some(night) = &a.night_imagery {
         let is_image = std::path::Path::new(night)
             .extension()

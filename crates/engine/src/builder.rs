@@ -76,6 +76,7 @@ pub struct GlobeBuilder {
     atmosphere: Option<Atmosphere>,
     fog: bool,
     morph: bool,
+    marched_haze: bool,
 }
 
 impl Default for GlobeBuilder {
@@ -107,6 +108,7 @@ impl Default for GlobeBuilder {
             atmosphere: None,
             fog: true,
             morph: true,
+            marched_haze: false,
         }
     }
 }
@@ -302,6 +304,19 @@ impl GlobeBuilder {
     /// Whether [`GlobeBuilder::morph`] is on.
     pub(crate) fn morph_on(&self) -> bool {
         self.morph
+    }
+
+    /// Whether every ground pixel marches the air along its own line of sight instead of
+    /// reading the frame's aerial-perspective table (default off; see
+    /// [`crate::Globe::set_marched_haze`]).
+    pub fn marched_haze(&mut self, on: bool) -> &mut Self {
+        self.marched_haze = on;
+        self
+    }
+
+    /// Whether [`GlobeBuilder::marched_haze`] is on.
+    pub(crate) fn marched_haze_on(&self) -> bool {
+        self.marched_haze
     }
 
     /// The night lights, if set.

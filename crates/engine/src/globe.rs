@@ -245,6 +245,7 @@ impl Globe {
                 renderer.set_night_lights(device, queue, builder.night_lights_ref());
                 renderer.set_procedural_lights(!builder.uses_real_data());
                 renderer.set_morph(builder.morph_on());
+                renderer.set_marched_haze(builder.marched_haze_on());
                 renderer
             },
             formats,
@@ -378,6 +379,14 @@ impl Globe {
     /// a pixel in one frame. Off, each tile shows its own at once.
     pub fn set_morph(&mut self, on: bool) {
         self.renderer.set_morph(on);
+    }
+
+    /// Whether every ground pixel marches the air between it and the eye (8 steps) instead of
+    /// reading the frame's aerial-perspective table (off by default): the table (Hillaire's
+    /// froxels, `globus_render`'s `aerial.rs`) is built once a frame from 1,024 rays and costs
+    /// each pixel a few lookups; the march is the reference it is tested against.
+    pub fn set_marched_haze(&mut self, on: bool) {
+        self.renderer.set_marched_haze(on);
     }
 
     /// How long a tile's own imagery takes to replace the ancestor's it showed while it

@@ -259,3 +259,84 @@ fn distant_ground_loses_more_contrast_to_the_air_than_near_ground() {
         "far ground keeps {kept_far:.2}, near {kept_near:.2}"
     );
 }
+
+/// Over the pixels both pictures cover with ground: the mean and largest channel difference
+/// (of 255) and the share of pixels with a channel more than 4 apart.
+fn ground_difference(a: &RgbaImage, b: &RgbaImage) -> (f64, f64, f64, u32) {
+    let (mut sum, mut worst, mut over, mut n) = (0.0, 0.0f64, 0u32, 0u32);
+    for y in 0..a.height {
+        for x in 0..a.width {
+            let (p, q) = (pixel(a, x, y), pixel(b, x, y));
+            if p[3] != 255.0 || q[3] != 255.0 {
+                continue;
+            }
+            let d = (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f64::max);
+            sum += d;
+            worst = worst.max(d);
+            over += u32::from(d > 4.0);
+            n += 1;
+        }
+    }
+    let n_f = f64::from(n.max(1));
+    (sum / n_f, worst, f64::from(over) / n_f, n)
+}
+
+#[test]
+fn the_aerial_perspective_table_draws_the_haze_the_march_does() {
+    // The frame's table (32 x 32 rays, 32 slices, read at four columns per pixel) against
+    // every ground pixel marching its own line of sight, in the same frames: from the ground
+    // to beyond the Moon's distance, with the Sun high, low ahead and on the terminator.
+    let (w, h) = (320u32, 180u32);
+    let mut off = Headless::new(&GlobeBuilder::new(), w, h).expect("a GPU or lavapipe");
+    let deg = f64::to_radians;
+    let cases = [
+        (
+            "horizon",
+            camera(7.6, 46.0, 1_000.0, 270.0, 0.0, true),
+            (20.0, 30.0),
+        ),
+        (
+            "into_sun",
+            camera(7.6, 46.0, 1_000.0, 270.0, 0.0, true),
+            (-75.0, 20.0),
+        ),
+        (
+            "steep_30km",
+            camera(7.6, 46.0, 30_000.0, 0.0, -35.0, false),
+            (20.0, 40.0),
+        ),
+        (
+            "oblique_300km",
+            camera(7.6, 40.0, 300_000.0, 0.0, -30.0, false),
+            (7.6, 23.0),
+        ),
+        (
+            "planet",
+            camera(10.0, 30.0, 15_000_000.0, 0.0, -90.0, false),
+            (80.0, 20.0),
+        ),
+    ];
+    for (name, spec, (sun_lon, sun_lat)) in cases {
+        let view = spec.view(off.globe(), 60.0, w, h);
+        let sun = Lighting::sun_over(deg(sun_lon), deg(sun_lat));
+        off.globe_mut().set_marched_haze(false);
+        let table = shot(&mut off, &view, &format!("table_{name}"), sun);
+        off.globe_mut().set_marched_haze(true);
+        let marched = shot(&mut off, &view, &format!("marched_{name}"), sun);
+        let (mean, worst, over, n) = ground_difference(&table, &marched);
+        eprintln!(
+            "{name}: {n} ground pixels, mean {mean:.3}, largest {worst}, {:.3} % over 4",
+            over * 100.0
+        );
+        assert!(n > 2_000, "{name}: only {n} ground pixels");
+        // (From 300 km the two differ by about 1 of 255 over much of the ground: the march's
+        // 8 steps against the table's 64; a 128-step march is nearer the table.)
+        assert!(mean < 1.0, "{name}: mean difference {mean:.2} of 255");
+        assert!(
+            over < 0.01,
+            "{name}: {:.2} % of pixels over 4 of 255",
+            over * 100.0
+        );
+        assert!(worst <= 16.0, "{name}: a pixel {worst} of 255 off");
+    }
+}

@@ -20,6 +20,7 @@ use globus_geo::{Atmosphere, DVec3, Ellipsoid};
 use globus_terrain::TerrainVertex;
 use globus_tiling::DrawTile;
 
+use crate::aerial::AerialTable;
 use crate::air::AirResources;
 use crate::camera::FrameCamera;
 use crate::fade::ColourFades;
@@ -40,6 +41,7 @@ pub(crate) struct FrameUniforms {
     viewport: [f32; 4],
     eye_position: [f32; 4],
     night: [f32; 4],
+    aerial: [f32; 4],
 }
 
 /// One indirect draw (the layout `multi_draw_indexed_indirect` reads).
@@ -175,6 +177,11 @@ pub struct GlobeRenderer {
     sky_pipeline: wgpu::RenderPipeline,
     /// The sky seen from the eye, rebuilt each frame the eye is in the air (`sky.wgsl`).
     sky_view: SkyView,
+    /// The air between the eye and the ground, rebuilt each frame (`aerial.rs`).
+    aerial: AerialTable,
+    /// Whether every ground fragment marches its own line of sight instead of reading
+    /// `aerial` (the reference).
+    marched_haze: bool,
     offset_buffer: wgpu::Buffer,
     offsets: Vec<[f32; 4]>,
     tile_map_buffer: wgpu::Buffer,
@@ -210,13 +217,17 @@ impl GlobeRenderer {
         formats: FrameFormats,
         pool: TilePool,
     ) -> Self {
-        let [a1, a2, a3, a4] = AirResources::layout_entries();
+        // The aerial-perspective table's build (compute) reads the frame group too.
+        let [a1, a2, a3, a4] = AirResources::layout_entries().map(|mut e| {
+            e.visibility |= wgpu::ShaderStages::COMPUTE;
+            e
+        });
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
             entries: &[
                 wgpu::BindGroupLayoutEntry {
                     binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
@@ -239,7 +250,12 @@ impl GlobeRenderer {
         let air = AirResources::new(device, queue, Atmosphere::earth(&Ellipsoid::WGS84));
         let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &air);
         let terrain_layout = terrain_bind_group_layout(device);
-        let terrain_pipeline = terrain_pipeline(device, formats, &frame_layout, &terrain_layout);
+        let aerial = AerialTable::new(device, &frame_layout);
+        let terrain_pipeline = terrain_pipeline(
+            device,
+            formats,
+            [&frame_layout, &terrain_layout, &aerial.layout],
+        );
         let sky_view = SkyView::new(device, &frame_layout);
         let sky_pipeline = sky_pipeline(device, formats, &frame_layout, &sky_view.layout);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -286,6 +302,8 @@ impl GlobeRenderer {
             terrain_pipeline,
             sky_pipeline,
             sky_view,
+            aerial,
+            marched_haze: false,
             offset_buffer,
             offsets: vec![[0.0; 4]; slots as usize],
             tile_map_buffer,
@@ -344,6 +362,18 @@ impl GlobeRenderer {
         self.fades.duration()
     }
 
+    /// Whether every ground fragment marches the air along its own line of sight (8 steps)
+    /// instead of reading the frame's aerial-perspective table (`aerial.rs`; the default).
+    /// The march is the reference the table is tested against, and slower.
+    pub fn set_marched_haze(&mut self, on: bool) {
+        self.marched_haze = on;
+    }
+
+    /// See [`GlobeRenderer::set_marched_haze`].
+    pub fn marched_haze(&self) -> bool {
+        self.marched_haze
+    }
+
     /// Whether tiles grow out of their parents ([`GlobeRenderer::set_morph`]).
     pub fn morph(&self) -> bool {
         self.morph
@@ -400,7 +430,12 @@ impl GlobeRenderer {
             eye_from_clip: eye_from_clip.to_cols_array_2d(),
             eye_up_height: [up.x, up.y, up.z, (eye_r - radii.x) as f32],
             sun: [sun.x, sun.y, sun.z, l.ambient],
-            planet: [radii.x as f32, 0.0, l.inscatter_gain, l.exposure],
+            planet: [
+                radii.x as f32,
+                if self.marched_haze { 1.0 } else { 0.0 },
+                l.inscatter_gain,
+                l.exposure,
+            ],
             viewport: [
                 view.width_px as f32,
                 view.height_px as f32,
@@ -418,11 +453,17 @@ impl GlobeRenderer {
                 (1.0 / camera.pixels_per_metre(1.0)) as f32,
                 if self.procedural_lights { 1.0 } else { 0.0 },
             ],
+            aerial: crate::aerial::columns_rect(camera, radii.x + self.air.atmosphere.thickness_m),
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniforms));
         let air = &self.air.atmosphere;
-        if !air.is_none() && eye_r - radii.x < air.thickness_m && !camera.is_orthographic() {
-            self.sky_view.render(device, queue, &self.frame_bind_group);
+        if !air.is_none() && !camera.is_orthographic() {
+            if eye_r - radii.x < air.thickness_m {
+                self.sky_view.render(device, queue, &self.frame_bind_group);
+            }
+            if !self.marched_haze {
+                self.aerial.build(device, queue, &self.frame_bind_group);
+            }
         }
 
         self.draws.clear();
@@ -535,6 +576,7 @@ impl GlobeRenderer {
             let (vertices, slots) = self.pool.vertex_buffers();
             pass.set_pipeline(&self.terrain_pipeline);
             pass.set_bind_group(1, bind_group, &[]);
+            pass.set_bind_group(2, &self.aerial.bind_group, &[]);
             pass.set_vertex_buffer(0, vertices.slice(..));
             pass.set_vertex_buffer(1, slots.slice(..));
             pass.set_index_buffer(
@@ -747,11 +789,11 @@ const TERRAIN_VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
 const EXTRA_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![3 => Uint32, 4 => Float32, 5 => Uint32];
 
+/// `layouts`: the frame group's, the terrain group's and the aerial-perspective table's.
 fn terrain_pipeline(
     device: &wgpu::Device,
     formats: FrameFormats,
-    frame_layout: &wgpu::BindGroupLayout,
-    terrain_layout: &wgpu::BindGroupLayout,
+    layouts: [&wgpu::BindGroupLayout; 3],
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("terrain"),
@@ -759,7 +801,7 @@ fn terrain_pipeline(
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some("terrain"),
-        bind_group_layouts: &[Some(frame_layout), Some(terrain_layout)],
+        bind_group_layouts: &layouts.map(Some),
         immediate_size: 0,
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -1064,6 +1106,7 @@ mod tests {
                 ("viewport", offset_of!(FrameUniforms, viewport)),
                 ("eye_position", offset_of!(FrameUniforms, eye_position)),
                 ("night", offset_of!(FrameUniforms, night)),
+                ("aerial", offset_of!(FrameUniforms, aerial)),
             ],
         );
         check(

@@ -19,6 +19,7 @@
 //!   a frame's passes share; [`FrameFormats`] says what pipelines drawing into them declare.
 //! * [`OffscreenTarget`]: rendering without a window, read back as RGBA.
 
+mod aerial;
 mod air;
 mod camera;
 mod context;

@@ -11,7 +11,8 @@ struct Frame {
     eye_up_height: vec4<f32>,
     // xyz: unit direction towards the sun (ECEF axes); w: ambient light.
     sun: vec4<f32>,
-    // x: planet equatorial radius (m); y: unused; z: inscatter gain; w: exposure.
+    // x: planet equatorial radius (m); y: 1 to march the air to each ground fragment instead of
+    // reading the aerial-perspective table (0); z: inscatter gain; w: exposure.
     planet: vec4<f32>,
     // x, y: viewport size in pixels; z, w: 1 / size.
     viewport: vec4<f32>,
@@ -22,6 +23,9 @@ struct Frame {
     // spans 1 m in front of the eye (an orthographic camera: at any distance); w: procedural
     // towns' gain (0: none; only without an image).
     night: vec4<f32>,
+    // The framebuffer rectangle the aerial-perspective table's columns spread over (pixels:
+    // left, top, right, bottom): the viewport from the air, the air's disc from space.
+    aerial: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -189,11 +193,50 @@ struct Air {
     transmittance: vec3<f32>,
 }
 
+// Rayleigh (x) and Cornette-Shanks Mie (y) phase functions at cosine `cos_theta` between the
+// ray and the Sun.
+fn air_phases(cos_theta: f32) -> vec2<f32> {
+    let g = atmosphere.mie.w;
+    return vec2<f32>(
+        3.0 / (16.0 * PI) * (1.0 + cos_theta * cos_theta),
+        3.0 / (8.0 * PI) * (1.0 - g * g) / (2.0 + g * g) * (1.0 + cos_theta * cos_theta)
+            / pow(1.0 + g * g - 2.0 * g * cos_theta, 1.5),
+    );
+}
+
+// `acc` carried over the stretch from `a` to `b` along the ray from `origin` in the unit
+// direction `dir` (Hillaire 2020, equation 6's per-step integral at the stretch's middle):
+// sunlight singly scattered (the phases of `air_phases`, the body's shadow) and multiply
+// scattered (the table) towards the eye, in units of the Sun's illuminance and before the
+// inscatter gain; the transmittance multiplies by the stretch's.
+fn air_step(acc: Air, origin: vec3<f32>, dir: vec3<f32>, a: f32, b: f32, sun: vec3<f32>, phases: vec2<f32>) -> Air {
+    let dt = b - a;
+    let p = origin + dir * (0.5 * (a + b));
+    let r = length(p);
+    let hp = r - atmosphere.shell.x;
+    let mu_s = dot(p, sun) / r;
+    let d = air_densities(hp);
+    let rayleigh = atmosphere.rayleigh.xyz * d.x;
+    let mie = atmosphere.mie.x * d.y;
+    let source = sun_light(hp, mu_s) * (rayleigh * phases.x + vec3<f32>(mie * phases.y))
+        + (rayleigh + vec3<f32>(mie)) * multiple_scattering(hp, mu_s);
+    let extinction = air_extinction(d);
+    let step = exp(-extinction * dt);
+    return Air(
+        acc.inscatter + acc.transmittance * source * (vec3<f32>(1.0) - step) / max(extinction, vec3<f32>(1e-12)),
+        acc.transmittance * step,
+    );
+}
+
+// What the inscatter of `air_step` is multiplied by for display.
+fn air_gain() -> f32 {
+    return atmosphere.stretch.w * frame.planet.z;
+}
+
 // The air between a point `h` above the sphere (unit direction `up` from its centre) and a
 // point `dist` away along the unit ray `dir` (the sky beyond, when `dist` is huge), all in the
-// atmosphere's space, marched in `steps` (Hillaire 2020, equation 6's per-step integral):
-// sunlight singly scattered (Rayleigh and Cornette-Shanks phases, the body's shadow) and
-// multiply scattered (the table), scaled by `planet.z` relative to the sunlit ground.
+// atmosphere's space, marched in `steps` of `air_step`, scaled by `planet.z` relative to the
+// sunlit ground.
 fn air_march(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32, steps: i32) -> Air {
     let clear = Air(vec3<f32>(0.0), vec3<f32>(1.0));
     if (atmosphere.shell.y <= 0.0) {
@@ -213,11 +256,7 @@ fn air_march(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32, steps: i32) -> Ai
         return clear;
     }
     let sun = air_sun();
-    let cos_theta = dot(dir, sun);
-    let rayleigh_phase = 3.0 / (16.0 * PI) * (1.0 + cos_theta * cos_theta);
-    let g = atmosphere.mie.w;
-    let mie_phase = 3.0 / (8.0 * PI) * (1.0 - g * g) / (2.0 + g * g) * (1.0 + cos_theta * cos_theta)
-        / pow(1.0 + g * g - 2.0 * g * cos_theta, 1.5);
+    let phases = air_phases(dot(dir, sun));
     let origin = up * (atmosphere.shell.x + h);
     // Samples crowd towards the ray's lowest point, where the air is densest (the eye's end
     // looking up, the ground's looking down, the tangent point along the limb): on each side
@@ -230,8 +269,7 @@ fn air_march(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32, steps: i32) -> Ai
     if (before > tiny) {
         split = select(steps / 2, steps, after <= tiny);
     }
-    var through = vec3<f32>(1.0);
-    var light = vec3<f32>(0.0);
+    var acc = clear;
     for (var i = 0; i < steps; i = i + 1) {
         var a: f32;
         var b: f32;
@@ -246,22 +284,9 @@ fn air_march(up: vec3<f32>, h: f32, dir: vec3<f32>, dist: f32, steps: i32) -> Ai
             a = lowest + after * (k / n) * (k / n);
             b = lowest + after * ((k + 1.0) / n) * ((k + 1.0) / n);
         }
-        let dt = b - a;
-        let p = origin + dir * (0.5 * (a + b));
-        let r = length(p);
-        let hp = r - atmosphere.shell.x;
-        let mu_s = dot(p, sun) / r;
-        let d = air_densities(hp);
-        let rayleigh = atmosphere.rayleigh.xyz * d.x;
-        let mie = atmosphere.mie.x * d.y;
-        let source = sun_light(hp, mu_s) * (rayleigh * rayleigh_phase + vec3<f32>(mie * mie_phase))
-            + (rayleigh + vec3<f32>(mie)) * multiple_scattering(hp, mu_s);
-        let extinction = air_extinction(d);
-        let step = exp(-extinction * dt);
-        light = light + through * source * (vec3<f32>(1.0) - step) / max(extinction, vec3<f32>(1e-12));
-        through = through * step;
+        acc = air_step(acc, origin, dir, a, b, sun, phases);
     }
-    return Air(light * (atmosphere.stretch.w * frame.planet.z), through);
+    return Air(acc.inscatter * air_gain(), acc.transmittance);
 }
 
 // The air between the eye and a point `dist` away along a unit ray (ECEF axes), or the sky
@@ -293,6 +318,61 @@ fn air_ortho(eye_offset: vec3<f32>, sky: bool, steps: i32) -> Air {
         dist = dot(eye_offset, f) * k;
     }
     return air_march(start.xyz, start.w, d / k, dist, steps);
+}
+
+// The aerial-perspective table (Hillaire 2020's froxels, `aerial.wgsl`, `aerial.rs`): the air
+// between the eye and points along the rays through a grid of AP_COLUMNS screen points, at
+// AP_SLICES depths along each. The columns' rays go through a regular grid of points spanning
+// `frame.aerial` edge to edge, column (i, j) the i-th from the left and the j-th from the top.
+const AP_COLUMNS: vec2<u32> = vec2<u32>(32u, 32u);
+const AP_SLICES: u32 = 32u;
+
+// The unit ray through the centre of column `c`, in the atmosphere's space.
+fn ap_ray(c: vec2<u32>) -> vec3<f32> {
+    let px = mix(frame.aerial.xy, frame.aerial.zw, vec2<f32>(c) / vec2<f32>(AP_COLUMNS - 1u));
+    let uv = px * frame.viewport.zw;
+    let ndc = vec2<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0);
+    // Reversed-Z: depth 1 is the near plane; the point there gives the view ray.
+    let near = frame.eye_from_clip * vec4<f32>(ndc, 1.0, 1.0);
+    let d = normalize(near.xyz / near.w) * atmosphere.stretch.xyz;
+    return d / length(d);
+}
+
+// Whether the eye is in the air: then a column's slices crowd towards it (the square of the
+// depth); from space they crowd towards the column's far end, near the ground, where the air
+// is dense.
+fn ap_in_air() -> bool {
+    return frame.eye_up_height.w < atmosphere.shell.y;
+}
+
+// The distance along a column whose air spans `range` (from the eye, atmosphere's space) at
+// depth `w` (0 at the range's start, 1 at its end).
+fn ap_distance(range: vec2<f32>, w: f32) -> f32 {
+    let x = select(1.0 - (1.0 - w) * (1.0 - w), w * w, ap_in_air());
+    return range.x + (range.y - range.x) * x;
+}
+
+// The inverse of `ap_distance`, clamped to the range.
+fn ap_depth(range: vec2<f32>, t: f32) -> f32 {
+    let x = clamp((t - range.x) / max(range.y - range.x, 1e-6), 0.0, 1.0);
+    return select(1.0 - sqrt(1.0 - x), sqrt(x), ap_in_air());
+}
+
+// Along a unit ray from the eye (atmosphere's space): where it enters the air (x; 0 from
+// inside it) and where it meets the body's sphere (y), or, if it misses, the distance to the
+// body's silhouette, which is where rays that just meet it do (so it is continuous across
+// the silhouette); z is 1 if it meets it. Points of neighbouring rays at the same share of
+// the way from x to y are at about the same height, which is how the table's columns are
+// matched to a pixel's ray from space.
+fn ap_entry_and_ground(dir: vec3<f32>) -> vec3<f32> {
+    let up = frame.eye_up_height.xyz;
+    let h = frame.eye_up_height.w;
+    let span = shell_span_from(up, h, dir, atmosphere.shell.y);
+    let ground = shell_span_from(up, h, dir, 0.0);
+    if (ground.y >= ground.x && ground.x > 0.0) {
+        return vec3<f32>(max(span.x, 0.0), ground.x, 1.0);
+    }
+    return vec3<f32>(max(span.x, 0.0), sqrt(max(h, 1.0) * (2.0 * atmosphere.shell.x + max(h, 1.0))), 0.0);
 }
 
 // Filmic-ish tone curve so bright sunlit snow does not clip hard.

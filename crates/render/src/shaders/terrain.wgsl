@@ -48,6 +48,126 @@ struct TileMap {
 @group(1) @binding(4) var night_lights: texture_2d<f32>;
 @group(1) @binding(5) var night_sampler: sampler;
 
+// The aerial-perspective table of this frame (`aerial.wgsl`): inscattered light and
+// transmittance per column and slice, and each column's range.
+@group(2) @binding(0) var ap_inscatter: texture_3d<f32>;
+@group(2) @binding(1) var ap_transmittance: texture_3d<f32>;
+@group(2) @binding(2) var ap_sampler: sampler;
+@group(2) @binding(3) var<storage, read> ap_ranges: array<vec4<f32>>;
+
+// The air along column `c` to the point at share `w` of the way from where its ray enters
+// the air to its ground (`ap_entry_and_ground`): its slices interpolated, and from clear air
+// at the start to the first slice's end (with the square of the depth in the air, where the
+// light builds up with the distance). `valid` is 0 for a column that misses the air.
+struct ApSample {
+    air: Air,
+    valid: f32,
+    // 1 if the column meets the body's sphere.
+    ground: f32,
+}
+
+fn aerial_column(c: vec2<u32>, w: f32) -> ApSample {
+    let range = ap_ranges[c.y * AP_COLUMNS.x + c.x];
+    if (range.y <= range.x) {
+        return ApSample(Air(vec3<f32>(0.0), vec3<f32>(1.0)), 0.0, 0.0);
+    }
+    let slices = f32(AP_SLICES);
+    // Slice k's value stands at u = k + 1.
+    var t = range.x + w * (range.z - range.x);
+    if (w < 0.0) {
+        t = -w;
+    }
+    let u = ap_depth(range.xy, t) * slices;
+    let uvw = vec3<f32>(
+        (vec2<f32>(c) + 0.5) / vec2<f32>(AP_COLUMNS),
+        (clamp(u - 1.0, 0.0, slices - 1.0) + 0.5) / slices,
+    );
+    let inscatter = textureSampleLevel(ap_inscatter, ap_sampler, uvw, 0.0).rgb;
+    let transmittance = textureSampleLevel(ap_transmittance, ap_sampler, uvw, 0.0).rgb;
+    let first = clamp(u, 0.0, 1.0);
+    let share = select(first, first * first, ap_in_air());
+    return ApSample(Air(inscatter * share, mix(vec3<f32>(1.0), transmittance, share)), 1.0, range.w);
+}
+
+// The air between the eye and the ground `dist` metres away along the unit ray `dir` (ECEF
+// axes) seen at framebuffer position `at`: the four nearest columns of the table, each at the
+// same share of the way from the air's edge to its ground as the pixel's own ray (so at about
+// the same height, and columns whose ranges differ either side of the body's silhouette still
+// agree), weighted by how near the pixel is to each; columns that miss the air are left out.
+// Marched when all four do.
+// From space, rays meeting the ground at a cosine under this are marched, and so are those
+// whose columns' light differs by more than this share of the brightest.
+const AP_GRAZING: f32 = 0.25;
+const AP_CONTRAST: f32 = 0.3;
+
+fn aerial_perspective(at: vec2<f32>, dir: vec3<f32>, dist: f32) -> Air {
+    let d = dir * atmosphere.stretch.xyz;
+    let k = length(d);
+    let own = ap_entry_and_ground(d / k);
+    // In the air the columns are read at the pixel's distance (they are nearly parallel where
+    // it matters, near the horizon); from space at its share of the way from the air's edge
+    // to the ground (rays that enter the air kilometres apart reach the same height there).
+    // Either way the pixel's own ray stops at the body's sphere, as `air_march`'s does.
+    var t = dist * k;
+    if (own.z > 0.0) {
+        t = min(t, own.y);
+    }
+    var w = (t - own.x) / max(own.y - own.x, 1.0);
+    if (ap_in_air()) {
+        w = -t;
+    }
+    let columns = vec2<f32>(AP_COLUMNS);
+    let f = (at - frame.aerial.xy) / (frame.aerial.zw - frame.aerial.xy) * (columns - 1.0);
+    let c0 = clamp(floor(f), vec2<f32>(0.0), columns - 2.0);
+    let near = clamp(f - c0, vec2<f32>(0.0), vec2<f32>(1.0));
+    let c = vec2<u32>(c0);
+    let s = array<ApSample, 4>(
+        aerial_column(c, w),
+        aerial_column(c + vec2<u32>(1u, 0u), w),
+        aerial_column(c + vec2<u32>(0u, 1u), w),
+        aerial_column(c + vec2<u32>(1u, 1u), w),
+    );
+    let weights = vec4<f32>(
+        (1.0 - near.x) * (1.0 - near.y) * s[0].valid,
+        near.x * (1.0 - near.y) * s[1].valid,
+        (1.0 - near.x) * near.y * s[2].valid,
+        near.x * near.y * s[3].valid,
+    );
+    let total = weights.x + weights.y + weights.z + weights.w;
+    // From space, about the body's silhouette (rays that graze the ground, and columns either
+    // side of it), where the air to a point changes fast across the screen, the pixel marches
+    // its own ray.
+    var graze = false;
+    if (!ap_in_air()) {
+        let origin = frame.eye_up_height.xyz * (atmosphere.shell.x + frame.eye_up_height.w);
+        let hit = origin + (d / k) * own.y;
+        graze = own.z == 0.0 || -dot(d / k, hit) < AP_GRAZING * length(hit);
+        // And where the columns' light differs by more than a share of itself (the
+        // terminator, where the body's shadow crosses the rays).
+        var lo = 1e30;
+        var hi = 0.0;
+        for (var i = 0; i < 4; i = i + 1) {
+            graze = graze || (s[i].valid > 0.0 && s[i].ground != own.z);
+            let light = dot(s[i].air.inscatter, vec3<f32>(1.0)) * frame.planet.w;
+            if (s[i].valid > 0.0) {
+                lo = min(lo, light);
+                hi = max(hi, light);
+            }
+        }
+        graze = graze || hi - lo > AP_CONTRAST * hi + 0.01;
+    }
+    if (total <= 1e-6 || graze) {
+        return air(dir, dist, GROUND_STEPS);
+    }
+    var inscatter = vec3<f32>(0.0);
+    var transmittance = vec3<f32>(0.0);
+    for (var i = 0; i < 4; i = i + 1) {
+        inscatter = inscatter + s[i].air.inscatter * weights[i];
+        transmittance = transmittance + s[i].air.transmittance * weights[i];
+    }
+    return Air(inscatter / total, transmittance / total);
+}
+
 // Sodium-lamp orange of city lights, and their brightness before tone mapping.
 const LIGHT_COLOUR: vec3<f32> = vec3<f32>(1.0, 0.72, 0.38);
 const LIGHT_GAIN: f32 = 2.5;
@@ -224,11 +344,15 @@ fn fs_main(in: VsOut) -> @location(0) vec4<f32> {
     var colour = albedo * (max(vec3<f32>(ambient), sky) + (1.0 - ambient) * diffuse * sunlight)
         + glint * sunlight + night_light(in.eye_offset, dist, texel.a);
     // Aerial perspective: the air between the eye and the ground dims and tints it.
+    // An orthographic camera's rays start from points of its plane, not from the eye, so
+    // they are marched; so are all when the frame asks for the reference (`planet.y`).
     var haze: Air;
     if (is_ortho()) {
         haze = air_ortho(in.eye_offset, false, GROUND_STEPS);
-    } else {
+    } else if (frame.planet.y > 0.5 || atmosphere.shell.y <= 0.0) {
         haze = air(-view, dist, GROUND_STEPS);
+    } else {
+        haze = aerial_perspective(in.clip.xy, -view, dist);
     }
     colour = colour * haze.transmittance + haze.inscatter;
     // Alpha 1 marks terrain coverage (read back by tests; forced opaque in saved images).
