@@ -21,7 +21,8 @@
 //! there, where the same distance would put one deep in the haze and the other above it).
 //! The hardware's trilinear filter cannot do that: neighbouring columns' ranges differ, most
 //! of all either side of the body's silhouette, so the same depth in the texture stands for
-//! different distances. From space, where the light changes faster than the grid follows
+//! different distances. Each column's two slices either side are read as texels and blended
+//! in the shader (on lavapipe a filtered 3D read costs eight texel fetches). From space, where the light changes faster than the grid follows
 //! (rays that graze the ground, columns either side of the silhouette, columns whose light
 //! differs by more than 30 %: the limb and the terminator, 1-10 % of the ground in the views
 //! tested), the fragment marches its own line of sight. An orthographic camera's rays start
@@ -29,14 +30,13 @@
 //! for the reference ([`crate::GlobeRenderer::set_marched_haze`]).
 //!
 //! The march it replaces takes 8 steps a fragment, each with two table lookups and three
-//! exponentials; the table costs a fragment two ray-sphere intersections and eight filtered
-//! lookups, and the pass 65,536 steps a frame. How far the table's pictures are from the
+//! exponentials; the table costs a fragment two ray-sphere intersections, four small
+//! records and sixteen texel reads, and the pass 65,536 steps a frame. How far the table's pictures are from the
 //! march's is tested in `crates/engine/tests/atmosphere.rs`.
 
 use globus_geo::DVec2;
 
 use crate::camera::FrameCamera;
-use crate::globe::fragment_sampler;
 use crate::shaders;
 
 /// Columns across and down, and slices along each (mirrors `AP_COLUMNS` and `AP_SLICES` in
@@ -94,7 +94,7 @@ pub(crate) fn columns_rect(camera: &FrameCamera, air_radius_m: f64) -> [f32; 4] 
 pub(crate) struct AerialTable {
     pipeline: wgpu::ComputePipeline,
     build_group: wgpu::BindGroup,
-    /// The terrain pipeline's group 2: the two volumes, their sampler and the ranges.
+    /// The terrain pipeline's group 2: the two volumes and the ranges.
     pub(crate) layout: wgpu::BindGroupLayout,
     pub(crate) bind_group: wgpu::BindGroup,
 }
@@ -175,7 +175,7 @@ impl AerialTable {
             binding,
             visibility: wgpu::ShaderStages::FRAGMENT,
             ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
                 view_dimension: wgpu::TextureViewDimension::D3,
                 multisampled: false,
             },
@@ -186,18 +186,8 @@ impl AerialTable {
             entries: &[
                 sampled_volume(0),
                 sampled_volume(1),
-                fragment_sampler(2),
-                ranges_entry(3, wgpu::ShaderStages::FRAGMENT, true),
+                ranges_entry(2, wgpu::ShaderStages::FRAGMENT, true),
             ],
-        });
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("aerial"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
         });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("aerial"),
@@ -207,10 +197,6 @@ impl AerialTable {
                 volume_entry(1),
                 wgpu::BindGroupEntry {
                     binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
                     resource: ranges.as_entire_binding(),
                 },
             ],

@@ -562,14 +562,12 @@ impl GlobeRenderer {
         &mut self.pool
     }
 
-    /// GPU phase: records the sky and the terrain prepared last into `pass`, a pass over
-    /// the frame's colour and depth targets that the caller began (clearing depth to 0,
-    /// infinitely far, and colour as it likes) and may go on drawing into.
+    /// GPU phase: records the terrain prepared last and then the sky where no terrain is
+    /// into `pass`, a pass over the frame's colour and depth targets that the caller began
+    /// (clearing depth to 0, infinitely far, and colour as it likes; the sky covers every
+    /// pixel still at 0) and may go on drawing into.
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
-        pass.set_pipeline(&self.sky_pipeline);
-        pass.set_bind_group(1, &self.sky_view.bind_group, &[]);
-        pass.draw(0..3, 0..1);
         if let Some(bind_group) = &self.terrain_bind_group
             && !self.draws.is_empty()
         {
@@ -585,6 +583,11 @@ impl GlobeRenderer {
             );
             pass.multi_draw_indexed_indirect(&self.indirect_buffer, 0, self.draws.len() as u32);
         }
+        // The sky last, only where the depth is still the cleared far plane: the ground
+        // hides most of it from space, and its pixels there would march the air for nothing.
+        pass.set_pipeline(&self.sky_pipeline);
+        pass.set_bind_group(1, &self.sky_view.bind_group, &[]);
+        pass.draw(0..3, 0..1);
     }
 
     /// The stats of the last [`GlobeRenderer::prepare`].
@@ -874,10 +877,11 @@ fn sky_pipeline(
             buffers: &[],
         },
         primitive: wgpu::PrimitiveState::default(),
+        // At depth 0, drawn after the terrain: it covers what is still cleared to 0.
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Always),
+            depth_compare: Some(wgpu::CompareFunction::Equal),
             stencil: wgpu::StencilState::default(),
             bias: wgpu::DepthBiasState::default(),
         }),

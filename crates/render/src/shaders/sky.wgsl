@@ -1,4 +1,5 @@
-// Sky and space: one full-screen triangle behind everything (drawn first, no depth).
+// Sky and space: one full-screen triangle at the far plane, drawn after the terrain where the
+// depth is still cleared (no depth written).
 // Alpha 0 marks background coverage.
 
 struct SkyOut {

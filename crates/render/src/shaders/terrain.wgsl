@@ -52,8 +52,7 @@ struct TileMap {
 // transmittance per column and slice, and each column's range.
 @group(2) @binding(0) var ap_inscatter: texture_3d<f32>;
 @group(2) @binding(1) var ap_transmittance: texture_3d<f32>;
-@group(2) @binding(2) var ap_sampler: sampler;
-@group(2) @binding(3) var<storage, read> ap_ranges: array<vec4<f32>>;
+@group(2) @binding(2) var<storage, read> ap_ranges: array<vec4<f32>>;
 
 // The air along column `c` to the point at share `w` of the way from where its ray enters
 // the air to its ground (`ap_entry_and_ground`): its slices interpolated, and from clear air
@@ -78,12 +77,15 @@ fn aerial_column(c: vec2<u32>, w: f32) -> ApSample {
         t = -w;
     }
     let u = ap_depth(range.xy, t) * slices;
-    let uvw = vec3<f32>(
-        (vec2<f32>(c) + 0.5) / vec2<f32>(AP_COLUMNS),
-        (clamp(u - 1.0, 0.0, slices - 1.0) + 0.5) / slices,
-    );
-    let inscatter = textureSampleLevel(ap_inscatter, ap_sampler, uvw, 0.0).rgb;
-    let transmittance = textureSampleLevel(ap_transmittance, ap_sampler, uvw, 0.0).rgb;
+    // The two slices either side, read and blended here: a filtered read would also blend
+    // in the neighbouring columns, at the wrong distances.
+    let z = clamp(u - 1.0, 0.0, slices - 1.0);
+    let k0 = min(u32(z), AP_SLICES - 2u);
+    let f = z - f32(k0);
+    let at0 = vec3<u32>(c, k0);
+    let at1 = vec3<u32>(c, k0 + 1u);
+    let inscatter = mix(textureLoad(ap_inscatter, at0, 0).rgb, textureLoad(ap_inscatter, at1, 0).rgb, f);
+    let transmittance = mix(textureLoad(ap_transmittance, at0, 0).rgb, textureLoad(ap_transmittance, at1, 0).rgb, f);
     let first = clamp(u, 0.0, 1.0);
     let share = select(first, first * first, ap_in_air());
     return ApSample(Air(inscatter * share, mix(vec3<f32>(1.0), transmittance, share)), 1.0, range.w);
