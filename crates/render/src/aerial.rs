@@ -37,6 +37,7 @@
 use globus_geo::DVec2;
 
 use crate::camera::FrameCamera;
+use crate::globe::fragment_texture;
 use crate::shaders;
 
 /// Columns across and down, and slices along each (mirrors `AP_COLUMNS` and `AP_SLICES` in
@@ -154,53 +155,37 @@ impl AerialTable {
                 ranges_entry(2, wgpu::ShaderStages::COMPUTE, false),
             ],
         });
-        // Both groups bind the two volumes first, binding i the i-th.
-        let volume_entry = |binding: u32| wgpu::BindGroupEntry {
-            binding,
-            resource: wgpu::BindingResource::TextureView(&views[binding as usize]),
+        // Both groups bind the same three resources, in the same order.
+        let bind = |label, layout| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(&views[0]),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&views[1]),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: ranges.as_entire_binding(),
+                    },
+                ],
+            })
         };
-        let build_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("aerial build"),
-            layout: &build_layout,
-            entries: &[
-                volume_entry(0),
-                volume_entry(1),
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: ranges.as_entire_binding(),
-                },
-            ],
-        });
-        let sampled_volume = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D3,
-                multisampled: false,
-            },
-            count: None,
-        };
+        let build_group = bind("aerial build", &build_layout);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("aerial"),
             entries: &[
-                sampled_volume(0),
-                sampled_volume(1),
+                fragment_texture(0, false, wgpu::TextureViewDimension::D3),
+                fragment_texture(1, false, wgpu::TextureViewDimension::D3),
                 ranges_entry(2, wgpu::ShaderStages::FRAGMENT, true),
             ],
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("aerial"),
-            layout: &layout,
-            entries: &[
-                volume_entry(0),
-                volume_entry(1),
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: ranges.as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = bind("aerial", &layout);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("aerial"),
             source: wgpu::ShaderSource::Wgsl(shaders::AERIAL.into()),

@@ -54,8 +54,9 @@ struct TileMap {
 @group(2) @binding(1) var ap_transmittance: texture_3d<f32>;
 @group(2) @binding(2) var<storage, read> ap_ranges: array<vec4<f32>>;
 
-// The air along column `c` to the point at share `w` of the way from where its ray enters
-// the air to its ground (`ap_entry_and_ground`): its slices interpolated, and from clear air
+// The air along column `c` to the point standing for a pixel's ground: from the air at the
+// pixel's distance `dist`, from space at share `share` of the way from where the column enters
+// the air to its ground (`ap_entry_and_ground`). Its slices interpolated, and from clear air
 // at the start to the first slice's end (with the square of the depth in the air, where the
 // light builds up with the distance). `valid` is 0 for a column that misses the air.
 struct ApSample {
@@ -65,17 +66,14 @@ struct ApSample {
     ground: f32,
 }
 
-fn aerial_column(c: vec2<u32>, w: f32) -> ApSample {
+fn aerial_column(c: vec2<u32>, share: f32, dist: f32) -> ApSample {
     let range = ap_ranges[c.y * AP_COLUMNS.x + c.x];
     if (range.y <= range.x) {
         return ApSample(Air(vec3<f32>(0.0), vec3<f32>(1.0)), 0.0, 0.0);
     }
     let slices = f32(AP_SLICES);
     // Slice k's value stands at u = k + 1.
-    var t = range.x + w * (range.z - range.x);
-    if (w < 0.0) {
-        t = -w;
-    }
+    let t = select(range.x + share * (range.z - range.x), dist, ap_in_air());
     let u = ap_depth(range.xy, t) * slices;
     // The two slices either side, read and blended here: a filtered read would also blend
     // in the neighbouring columns, at the wrong distances.
@@ -87,8 +85,8 @@ fn aerial_column(c: vec2<u32>, w: f32) -> ApSample {
     let inscatter = mix(textureLoad(ap_inscatter, at0, 0).rgb, textureLoad(ap_inscatter, at1, 0).rgb, f);
     let transmittance = mix(textureLoad(ap_transmittance, at0, 0).rgb, textureLoad(ap_transmittance, at1, 0).rgb, f);
     let first = clamp(u, 0.0, 1.0);
-    let share = select(first, first * first, ap_in_air());
-    return ApSample(Air(inscatter * share, mix(vec3<f32>(1.0), transmittance, share)), 1.0, range.w);
+    let built = select(first, first * first, ap_in_air());
+    return ApSample(Air(inscatter * built, mix(vec3<f32>(1.0), transmittance, built)), 1.0, range.w);
 }
 
 // The air between the eye and the ground `dist` metres away along the unit ray `dir` (ECEF
@@ -114,20 +112,17 @@ fn aerial_perspective(at: vec2<f32>, dir: vec3<f32>, dist: f32) -> Air {
     if (own.z > 0.0) {
         t = min(t, own.y);
     }
-    var w = (t - own.x) / max(own.y - own.x, 1.0);
-    if (ap_in_air()) {
-        w = -t;
-    }
+    let w = (t - own.x) / max(own.y - own.x, 1.0);
     let columns = vec2<f32>(AP_COLUMNS);
     let f = (at - frame.aerial.xy) / (frame.aerial.zw - frame.aerial.xy) * (columns - 1.0);
     let c0 = clamp(floor(f), vec2<f32>(0.0), columns - 2.0);
     let near = clamp(f - c0, vec2<f32>(0.0), vec2<f32>(1.0));
     let c = vec2<u32>(c0);
     let s = array<ApSample, 4>(
-        aerial_column(c, w),
-        aerial_column(c + vec2<u32>(1u, 0u), w),
-        aerial_column(c + vec2<u32>(0u, 1u), w),
-        aerial_column(c + vec2<u32>(1u, 1u), w),
+        aerial_column(c, w, t),
+        aerial_column(c + vec2<u32>(1u, 0u), w, t),
+        aerial_column(c + vec2<u32>(0u, 1u), w, t),
+        aerial_column(c + vec2<u32>(1u, 1u), w, t),
     );
     let weights = vec4<f32>(
         (1.0 - near.x) * (1.0 - near.y) * s[0].valid,
