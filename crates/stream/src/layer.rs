@@ -30,7 +30,7 @@ use globus_tiling::{
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use crate::colour_jobs::{ColourChannel, Failures, MAX_REMEMBERED_KEYS};
-use crate::nodes::NodeTable;
+use crate::nodes::{NOWHERE, NodeTable};
 use crate::scheduler::Outcome;
 use crate::terrain_jobs::TerrainJobs;
 use crate::{LruCache, Scheduler, SchedulerStats, TerrainData, TerrainSource};
@@ -555,11 +555,17 @@ impl TileOracle for TerrainLayer {
             // Only reachable through a tile selection did not descend into; stay correct.
             None => self.estimate(key),
         };
-        self.info(key, &node)
+        self.info(key, &node, self.nodes.children_at(key))
     }
 
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
-        let family = self.nodes.family(Some(parent));
+    fn child_tiles(
+        &self,
+        parent: TileKey,
+        info: &TileInfo,
+        children: &[TileKey],
+        out: &mut [Option<TileInfo>; 4],
+    ) {
+        let family = self.nodes.family_at(parent, info.children_at);
         for (i, slot) in out.iter_mut().enumerate() {
             let Some(&child) = children.get(i) else {
                 *slot = None;
@@ -569,14 +575,15 @@ impl TileOracle for TerrainLayer {
                 Some(n) => n,
                 None => self.estimate(child),
             };
-            *slot = Some(self.info(child, &node));
+            let at = family.map_or(NOWHERE, |f| f.kids()[i]);
+            *slot = Some(self.info(child, &node, at));
         }
     }
 }
 
 impl TerrainLayer {
     /// Selection's view of a record.
-    fn info(&self, key: TileKey, node: &Node) -> TileInfo {
+    fn info(&self, key: TileKey, node: &Node, children_at: u32) -> TileInfo {
         let has_children = key.level() < self.max_level;
         let state = match node.state {
             TileState::Unloaded if self.no_data.contains(&key) => TileState::NoData,
@@ -589,6 +596,7 @@ impl TerrainLayer {
             geometric_error_m: node.error_m,
             state,
             has_children,
+            children_at,
         }
     }
 }
@@ -752,7 +760,7 @@ mod tests {
                 }
                 let children = GLOBE_SCHEME.children(parent);
                 let mut together = [None; 4];
-                layer.child_tiles(parent, &children, &mut together);
+                layer.child_tiles(parent, &layer.tile(parent), &children, &mut together);
                 for (i, &child) in children.iter().enumerate() {
                     assert_eq!(together[i], Some(layer.tile(child)), "{child}");
                 }
@@ -761,5 +769,6 @@ mod tests {
             }
         }
         assert!(parents > 3, "{parents} loaded parents among those compared");
+        layer.nodes.check_links();
     }
 }

@@ -122,6 +122,7 @@ impl TileOracle for MemoryOracle {
             geometric_error_m: self.error_of(key),
             state,
             has_children: key.level() < self.leaf_level,
+            children_at: TileInfo::NOWHERE,
         }
     }
 }

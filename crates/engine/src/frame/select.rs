@@ -27,8 +27,14 @@ impl TileOracle for ResidentOracle<'_> {
         info
     }
 
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
-        self.layer.child_tiles(parent, children, out);
+    fn child_tiles(
+        &self,
+        parent: TileKey,
+        info: &TileInfo,
+        children: &[TileKey],
+        out: &mut [Option<TileInfo>; 4],
+    ) {
+        self.layer.child_tiles(parent, info, children, out);
         // The layer's children are the engine grid's, in its order: one lookup for all.
         let resident = self.residency.resident_children(parent);
         for (i, info) in out.iter_mut().enumerate() {
@@ -98,7 +104,7 @@ mod tests {
         // Children read together answer as they do one by one: not resident, not loaded.
         let children = GLOBE_SCHEME.children(root);
         let mut together = [None; 4];
-        oracle.child_tiles(root, &children, &mut together);
+        oracle.child_tiles(root, &oracle.tile(root), &children, &mut together);
         for (i, &child) in children.iter().enumerate() {
             assert_eq!(together[i], Some(oracle.tile(child)));
             assert_eq!(oracle.tile(child).bounds, layer.tile(child).bounds);
@@ -121,7 +127,7 @@ mod tests {
                 residency: &residency,
             };
             let mut together = [None; 4];
-            oracle.child_tiles(root, &children, &mut together);
+            oracle.child_tiles(root, &oracle.tile(root), &children, &mut together);
             let expected = if resident {
                 TileState::Loaded
             } else {

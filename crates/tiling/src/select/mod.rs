@@ -313,7 +313,7 @@ impl<O: TileOracle> Walk<'_, O> {
             return;
         }
         let mut visible = [None; 4];
-        self.oracle.child_tiles(key, &children, &mut visible);
+        self.oracle.child_tiles(key, info, &children, &mut visible);
         let n = children.len();
         // The children in view: loaded ones are visited, the others leave their quadrants
         // to this tile.

@@ -27,6 +27,15 @@ pub struct TileInfo {
     pub state: TileState,
     /// Whether finer tiles exist below this one.
     pub has_children: bool,
+    /// The oracle's own handle to where it keeps this tile's children's records
+    /// ([`TileInfo::NOWHERE`] if it has none), handed back to [`TileOracle::child_tiles`]
+    /// so it need not search for them.
+    pub children_at: u32,
+}
+
+impl TileInfo {
+    /// No handle to the tile's children's records.
+    pub const NOWHERE: u32 = u32::MAX;
 }
 
 /// Answers selection's questions about tiles. Implementations must be cheap: selection asks
@@ -39,11 +48,18 @@ pub trait TileOracle {
     fn tile(&self, key: TileKey) -> TileInfo;
 
     /// What is known about each of `parent`'s children, in order, into `out` (one entry per
-    /// child, the rest `None`); `children` is `self.scheme().children(parent)`. Selection
-    /// asks this whenever it refines a tile, so oracles that keep siblings together should
-    /// answer it with one lookup; the default asks [`TileOracle::tile`] for each child.
-    fn child_tiles(&self, parent: TileKey, children: &[TileKey], out: &mut [Option<TileInfo>; 4]) {
-        let _ = parent;
+    /// child, the rest `None`); `children` is `self.scheme().children(parent)` and `info`
+    /// what the oracle said about `parent`. Selection asks this whenever it refines a tile,
+    /// so oracles that keep siblings together should answer it with one lookup (through
+    /// [`TileInfo::children_at`]); the default asks [`TileOracle::tile`] for each child.
+    fn child_tiles(
+        &self,
+        parent: TileKey,
+        info: &TileInfo,
+        children: &[TileKey],
+        out: &mut [Option<TileInfo>; 4],
+    ) {
+        let _ = (parent, info);
         *out = [None; 4];
         for (slot, &child) in out.iter_mut().zip(children) {
             *slot = Some(self.tile(child));
