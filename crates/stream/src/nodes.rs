@@ -22,14 +22,14 @@
 //! is linked from the roots'); a record may be missing (the layer then estimates one on
 //! demand, see `TerrainLayer::estimate`).
 
-use globus_tiling::{GLOBE_SCHEME, TileKey};
+use globus_tiling::{GLOBE_SCHEME, TileInfo, TileKey};
 use rustc_hash::FxHashMap;
 
 /// The most children a tile has.
 const MAX_CHILDREN: usize = 4;
 
-/// No family: a member without children's records.
-pub(crate) const NOWHERE: u32 = u32::MAX;
+/// No family: a member without children's records (selection's own "no handle").
+pub(crate) const NOWHERE: u32 = TileInfo::NOWHERE;
 
 /// One parent's children's records, in the order of `GLOBE_SCHEME.children(parent)`.
 #[derive(Clone, Copy, Debug)]
