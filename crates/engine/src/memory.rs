@@ -131,6 +131,12 @@ impl MemoryPlan {
         while gpu_slots > MIN_GPU_SLOTS && gpu_bytes(gpu_slots) + MIN_TILE_CACHE > left {
             gpu_slots -= 1;
         }
+        // The pool gives a multiple of 6 one layer more (`globus_render::array_layers`, for
+        // the GL backend): plan one less, so the pool is the size and the bytes planned.
+        // (The bounds are no multiples of 6, so this stays within them.)
+        if gpu_slots.is_multiple_of(6) {
+            gpu_slots -= 1;
+        }
         let gpu_pool = gpu_bytes(gpu_slots);
         Ok(Self {
             total,
@@ -193,6 +199,18 @@ mod tests {
             assert_eq!(sum, p.total, "{p:?}");
             assert!(p.tile_cache >= MIN_TILE_CACHE, "{p:?}");
             assert!((MIN_GPU_SLOTS..=MAX_GPU_SLOTS).contains(&p.gpu_slots));
+            assert_eq!(p.gpu_pool, slot(p.gpu_slots));
+        }
+        // Every total gets a slot count the pool allocates as it is: a multiple of 6 would
+        // get a layer more than planned (the budget test once failed by one colour layer's
+        // 87,380 bytes).
+        for total_mb in 384..1600 {
+            let p = MemoryPlan::new(total_mb * MIB, Some(120 * MIB), 16, true, slot).unwrap();
+            assert_eq!(
+                globus_render::array_layers(p.gpu_slots, 2048),
+                p.gpu_slots,
+                "{p:?}"
+            );
             assert_eq!(p.gpu_pool, slot(p.gpu_slots));
         }
         // More memory: a bigger cache and pool, never smaller.
