@@ -1,13 +1,14 @@
 //! LOD selection against the real terrain layer (procedural planet, loaded tiles cached), at
 //! 1920x1080 along the Alps dive: the cost `globus bench` reports per frame, without the
-//! rasteriser and tile generation competing for the CPU.
+//! rasteriser and tile generation competing for the CPU. With the Earth's air as fog, as the
+//! engine selects by default (`GlobeBuilder::fog`).
 
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use globus_geo::{Cartographic, View};
+use globus_geo::{Atmosphere, Cartographic, Ellipsoid, View};
 use globus_stream::{ProceduralSource, TerrainLayer, TerrainLayerOptions, TerrainSource};
 use globus_tiling::{Selection, SelectionOptions, TileOracle, TileRequest, select_into};
 
@@ -46,7 +47,7 @@ fn selection(c: &mut Criterion) {
         ("1 km above ground, horizon", ground + 1_000.0, 0.0),
     ] {
         let view = View::from_geodetic(
-            &globus_geo::Ellipsoid::WGS84,
+            &Ellipsoid::WGS84,
             Cartographic::from_degrees(7.6, 46.0, alt),
             0.0,
             f64::to_radians(pitch),
@@ -54,9 +55,17 @@ fn selection(c: &mut Criterion) {
             1920,
             1080,
         );
-        let layer = loaded_layer(&view, &SelectionOptions::default());
+        let fog = Some(Atmosphere::for_body(&Ellipsoid::WGS84));
+        let layer = loaded_layer(
+            &view,
+            &SelectionOptions {
+                fog,
+                ..SelectionOptions::default()
+            },
+        );
         let options = SelectionOptions {
             occluder: *layer.occluder(),
+            fog,
             ..SelectionOptions::default()
         };
         let mut sel = Selection::default();
