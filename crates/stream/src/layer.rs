@@ -550,8 +550,9 @@ impl TileOracle for TerrainLayer {
     }
 
     fn tile(&self, key: TileKey) -> TileInfo {
+        let (node, children_at) = self.nodes.get_with_children_at(key);
         let estimated;
-        let node = match self.nodes.get(key) {
+        let node = match node {
             Some(n) => n,
             // Only reachable through a tile selection did not descend into; stay correct.
             None => {
@@ -559,7 +560,7 @@ impl TileOracle for TerrainLayer {
                 &estimated
             }
         };
-        self.info(key, node, self.nodes.children_at(key))
+        self.info(key, node, children_at)
     }
 
     fn child_tiles(

@@ -196,11 +196,13 @@ impl<N: Copy> NodeTable<N> {
         self.family(parent)?.members[i].as_ref()
     }
 
-    /// Where the family of `key`'s children is ([`NOWHERE`] if it has none).
-    pub(crate) fn children_at(&self, key: TileKey) -> u32 {
-        slot(key)
-            .and_then(|(parent, i)| Some(self.family(parent)?.kids[i]))
-            .unwrap_or(NOWHERE)
+    /// The record of `key` and where the family of its children is ([`NOWHERE`] if it has
+    /// none), from one lookup of its own family.
+    pub(crate) fn get_with_children_at(&self, key: TileKey) -> (Option<&N>, u32) {
+        match slot(key).and_then(|(parent, i)| Some((self.family(parent)?, i))) {
+            Some((family, i)) => (family.members[i].as_ref(), family.kids[i]),
+            None => (None, NOWHERE),
+        }
     }
 
     /// Whether `key` has a record.
@@ -320,7 +322,7 @@ mod tests {
             let (grand, i) = slot(parent).expect("a tile");
             let at = table.family(grand).expect("family above").kids()[i];
             assert_ne!(at, NOWHERE);
-            assert_eq!(table.children_at(parent), at);
+            assert_eq!(table.get_with_children_at(parent), (table.get(parent), at));
             let by_link = table.family_at(parent, at).expect("family");
             assert_eq!(
                 by_link.members(),
