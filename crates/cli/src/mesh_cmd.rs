@@ -92,7 +92,7 @@ pub fn run(args: &MeshArgs) -> anyhow::Result<Value> {
         let start = Instant::now();
         match args.method.as_str() {
             "rtin" => {
-                rtin.rebuild(&grid, &mut scratch);
+                rtin.rebuild_for(&grid, &mut scratch, max_error);
                 rtin.mesh_into(max_error, u16::MAX, &mut scratch, &mut mesh);
             }
             "decimate" => mesh = decimate::decimate(&grid, max_error),

@@ -24,7 +24,7 @@ use globus_geo::{Cartographic, DVec2, DVec3, Ellipsoid};
 use globus_tiling::{GLOBE_SCHEME, Quadrants, TileBounds, TileKey};
 
 use crate::TerrainTile;
-use crate::adaptive::{AdaptiveMesh, HeightGrid, Rtin};
+use crate::adaptive::{AdaptiveMesh, HeightGrid, Rtin, RtinScratch};
 use crate::grid::{MESH_SEGMENTS, MESH_SIDE};
 
 /// One vertex as the GPU reads it (20 bytes).
@@ -289,10 +289,12 @@ fn cut(
         Err(e) => unreachable!("the tile grid is 2^5 + 1 samples: {e}"),
     };
     let budget = options.error_fraction * tile.geometric_error_m;
-    let rtin = Rtin::new(&grid);
     if budget.is_nan() || budget <= 0.0 {
-        return (rtin.mesh_with(-1.0, 1), 0.0);
+        return (Rtin::new(&grid).mesh_with(-1.0, 1), 0.0);
     }
+    // Built for the one bound the tile is cut at (the same mesh as a full build's).
+    let mut rtin = Rtin::default();
+    rtin.rebuild_for(&grid, &mut RtinScratch::default(), budget * 0.5);
     // Sagitta of a right triangle with legs of L cells (hypotenuse L sqrt 2): the body bulges
     // (L s)^2 / (4 R) under its circumcircle. Allow half the budget for that.
     // Legs of at most half the tile: every triangle lies in one quadrant (see
@@ -306,7 +308,6 @@ fn cut(
     // gap a vertical skirt closes only from the side. Keep those edges' samples at a stride
     // whose chords stray at most half the budget (the skirts cover what is left).
     let (_, _, stride) = parallel_edges(tile, radius_m, budget);
-    let mut rtin = rtin;
     if stride < max_leg {
         let last = MESH_SEGMENTS as u16;
         rtin.require(|x, y| (y == 0 || y == last) && x % stride == 0);

@@ -100,10 +100,21 @@ impl HeightGrid {
         self.heights[y * self.side + x]
     }
 
-    /// Lowest and highest sample.
+    /// Lowest and highest sample (in eight lanes with compare-and-select: the samples are
+    /// finite, and `f32::min`'s NaN rules would keep the loop scalar).
     pub fn min_max(&self) -> (f32, f32) {
-        self.heights
-            .iter()
+        let (mut lo, mut hi) = ([f32::INFINITY; 8], [f32::NEG_INFINITY; 8]);
+        let chunks = self.heights.chunks_exact(8);
+        let tail = chunks.remainder();
+        for chunk in chunks {
+            for k in 0..8 {
+                lo[k] = if chunk[k] < lo[k] { chunk[k] } else { lo[k] };
+                hi[k] = if chunk[k] > hi[k] { chunk[k] } else { hi[k] };
+            }
+        }
+        tail.iter()
+            .chain(&lo)
+            .chain(&hi)
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
                 (lo.min(h), hi.max(h))
             })

@@ -27,7 +27,7 @@ use crate::adaptive::rows::{larger, row_deviation};
 
 /// Levels up to this square size are computed across squares, larger ones, whose triangles
 /// have long rows, along rows.
-const ACROSS_SQUARES_UP_TO: usize = 16;
+pub(super) const ACROSS_SQUARES_UP_TO: usize = 16;
 
 /// The refinement error stored at every sample of the `side` x `side` grid `h` (0 at the
 /// tile's corners): level by level from the smallest squares up.
@@ -45,7 +45,7 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch, errors: &mut
         } else {
             across_squares(h, side, s, scratch);
         }
-        combine(errors, scratch, side, s);
+        combine(errors, &scratch.a, &scratch.b, side, s);
         s *= 2;
     }
 }
@@ -54,16 +54,26 @@ pub(super) fn errors(h: &[f32], side: usize, scratch: &mut Scratch, errors: &mut
 /// would cost page faults every level).
 #[derive(Default)]
 pub(super) struct Scratch {
+    /// Per level, coarsest first: the per-square errors of a bound's build
+    /// ([`super::bound::errors_for_bound`]).
+    pub(super) per_level: Vec<LevelErrors>,
     /// The grid regrouped for [`across_squares`], once `phased_filled`.
     phased: Phased,
-    phased_filled: bool,
+    pub(super) phased_filled: bool,
     /// The grid transposed, for [`along_rows`], once `transposed`.
     columns: Vec<f32>,
-    transposed: bool,
+    pub(super) transposed: bool,
     /// Per square, row-major: both A(s) halves.
-    a: Vec<f32>,
+    pub(super) a: Vec<f32>,
     /// Per square: the B(s) triangles north, south, west and east of its centre.
-    b: Vec<[f32; 4]>,
+    pub(super) b: Vec<[f32; 4]>,
+}
+
+/// One level's per-square errors, as [`Scratch::a`] and [`Scratch::b`] hold them.
+#[derive(Default)]
+pub(super) struct LevelErrors {
+    pub(super) a: Vec<f32>,
+    pub(super) b: Vec<[f32; 4]>,
 }
 
 impl Scratch {
@@ -75,10 +85,10 @@ impl Scratch {
     }
 }
 
-const NORTH: usize = 0;
-const SOUTH: usize = 1;
-const WEST: usize = 2;
-const EAST: usize = 3;
+pub(super) const NORTH: usize = 0;
+pub(super) const SOUTH: usize = 1;
+pub(super) const WEST: usize = 2;
+pub(super) const EAST: usize = 3;
 
 /// Square rows per parallel task: enough for about 64k samples, below which scheduling
 /// costs more than the work.
@@ -416,16 +426,16 @@ fn transpose(h: &[f32], side: usize, columns: &mut Vec<f32>) {
 
 /// A plane over a square as its value at `(0, k)` and its slopes: `p0 + gx i + gy k`.
 #[derive(Clone, Copy)]
-struct Plane {
-    p0: f32,
-    gx: f32,
-    gy: f32,
+pub(super) struct Plane {
+    pub(super) p0: f32,
+    pub(super) gx: f32,
+    pub(super) gy: f32,
 }
 
 impl Plane {
     /// `max |h - plane|` over columns `i0..=i1` of the square's row `k`.
     #[inline(always)]
-    fn deviation(self, row: &[f32], k: usize, (i0, i1): (usize, usize)) -> f32 {
+    pub(super) fn deviation(self, row: &[f32], k: usize, (i0, i1): (usize, usize)) -> f32 {
         let start = self.p0 + self.gy * k as f32 + self.gx * i0 as f32;
         row_deviation(&row[i0..=i1], start, self.gx)
     }
@@ -433,29 +443,53 @@ impl Plane {
 
 /// Corner heights of the s-square at `(x, y)`: NW, NE, SW, SE, centre.
 #[inline(always)]
-fn corners(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32; 5] {
+pub(super) fn corners(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32; 5] {
     let at = |i: usize, k: usize| h[(y + k) * side + x + i];
     [at(0, 0), at(s, 0), at(0, s), at(s, s), at(s / 2, s / 2)]
 }
 
-/// The A(s) error of the s-square at `(x, y)`, both halves, over its interior rows.
-fn halves(h: &[f32], side: usize, (x, y): (usize, usize), s: usize, nw_se: bool) -> f32 {
-    let [nw, ne, sw, se, _] = corners(h, side, (x, y), s);
+/// The planes of the s-square's two A(s) halves from its corners: with the NW-SE diagonal
+/// (`nw_se`), lower left (NW, SW, SE) then upper right (NW, NE, SE); with the NE-SW one,
+/// upper left (NW, NE, SW) then lower right (NE, SW, SE).
+#[inline(always)]
+pub(super) fn half_planes([nw, ne, sw, se, _]: [f32; 5], s: usize, nw_se: bool) -> [Plane; 2] {
     let inv = 1.0 / s as f32;
     let plane = |p0, gx, gy| Plane { p0, gx, gy };
-    // With the NW-SE diagonal, lower left (NW, SW, SE) then upper right (NW, NE, SE); with
-    // the NE-SW one, upper left (NW, NE, SW) then lower right (NE, SW, SE).
-    let (first, second) = if nw_se {
-        (
+    if nw_se {
+        [
             plane(nw, (se - sw) * inv, (sw - nw) * inv),
             plane(nw, (ne - nw) * inv, (se - ne) * inv),
-        )
+        ]
     } else {
-        (
+        [
             plane(nw, (ne - nw) * inv, (sw - nw) * inv),
             plane(sw + ne - se, (se - sw) * inv, (se - ne) * inv),
-        )
-    };
+        ]
+    }
+}
+
+/// The planes of the s-square's B(s) triangles north and south of its centre, from its
+/// corners (the west and east ones are these on the transposed grid).
+#[inline(always)]
+pub(super) fn north_south_planes([nw, ne, sw, se, c]: [f32; 5], s: usize) -> [Plane; 2] {
+    let inv = 1.0 / s as f32;
+    [
+        Plane {
+            p0: nw,
+            gx: (ne - nw) * inv,
+            gy: (2.0 * c - nw - ne) * inv,
+        },
+        Plane {
+            p0: 2.0 * c - se,
+            gx: (se - sw) * inv,
+            gy: (sw + se - 2.0 * c) * inv,
+        },
+    ]
+}
+
+/// The A(s) error of the s-square at `(x, y)`, both halves, over its interior rows.
+fn halves(h: &[f32], side: usize, (x, y): (usize, usize), s: usize, nw_se: bool) -> f32 {
+    let [first, second] = half_planes(corners(h, side, (x, y), s), s, nw_se);
     let mut worst = 0.0f32;
     for k in 1..s {
         let row = &h[(y + k) * side + x..=(y + k) * side + x + s];
@@ -470,18 +504,8 @@ fn halves(h: &[f32], side: usize, (x, y): (usize, usize), s: usize, nw_se: bool)
 /// The errors of the B(s) triangles on the north and south sides of the s-square at
 /// `(x, y)`, over their hypotenuse and interior.
 fn north_south(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32; 2] {
-    let [nw, ne, sw, se, c] = corners(h, side, (x, y), s);
-    let (inv, half) = (1.0 / s as f32, s / 2);
-    let north = Plane {
-        p0: nw,
-        gx: (ne - nw) * inv,
-        gy: (2.0 * c - nw - ne) * inv,
-    };
-    let south = Plane {
-        p0: 2.0 * c - se,
-        gx: (se - sw) * inv,
-        gy: (sw + se - 2.0 * c) * inv,
-    };
+    let [north, south] = north_south_planes(corners(h, side, (x, y), s), s);
+    let half = s / 2;
     let row = |k: usize| &h[(y + k) * side + x..=(y + k) * side + x + s];
     let (mut n, mut so) = (0.0f32, 0.0f32);
     for k in 0..half {
@@ -494,8 +518,7 @@ fn north_south(h: &[f32], side: usize, (x, y): (usize, usize), s: usize) -> [f32
 
 /// Stores level `s` from the per-square errors: B(s) values at the side midpoints, then A(s)
 /// values at the square centres, each with its children's values.
-pub(super) fn combine(errors: &mut [f32], scratch: &Scratch, side: usize, s: usize) {
-    let (a, b) = (&scratch.a, &scratch.b);
+pub(super) fn combine(errors: &mut [f32], a: &[f32], b: &[[f32; 4]], side: usize, s: usize) {
     let squares = (side - 1) / s;
     let (half, quarter) = (s / 2, s / 4);
     let at = |x: usize, y: usize| y * side + x;
