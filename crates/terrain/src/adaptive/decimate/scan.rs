@@ -1,27 +1,15 @@
-//! Scanning a triangle's grid samples for the largest distance to its plane: the inner loop
-//! of both passes.
+//! Whether a triangle holds the bound: every grid sample inside or on it within the bound of
+//! its plane. The inner loop of the decimator.
 //!
-//! The exact scan ([`scan_exact`], f64) is slow per sample; [`Scanner::scan`] does the same in
+//! The exact scan ([`scan_exact`], f64) is slow per sample; [`Scanner::holds`] does the same in
 //! f32 lanes ([`row_deviation`]) over row spans walked incrementally (no division per row),
-//! and only falls back on the exact scan when the f32 value lies so close to the bound that its
-//! rounding could put it on the wrong side. So every decision against the bound is the exact
-//! one; only the order in which triangles and ears are taken may differ in the last bits.
+//! gives up at the first row beyond the bound, and only falls back on the exact scan when the
+//! f32 value lies so close to the bound that its rounding could put it on the wrong side. So
+//! every answer is the exact one.
 
 use super::orient;
 use crate::adaptive::HeightGrid;
-use crate::adaptive::rows::{position_of, row_deviation};
-
-/// A triangle's largest distance from its plane and where it is (grid column, row).
-pub(super) type Worst = (f32, [u16; 2]);
-
-/// What a scan found against the bound.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) enum Verdict {
-    /// Every sample is within the bound; the largest distance (approximate).
-    Within(f32),
-    /// Some sample is beyond it: the largest distance found (approximate) and where.
-    Beyond(Worst),
-}
+use crate::adaptive::rows::row_deviation;
 
 /// Scans triangles of one grid against one bound.
 pub(super) struct Scanner<'a> {
@@ -49,28 +37,14 @@ impl<'a> Scanner<'a> {
         self.grid
     }
 
-    /// Whether triangle `p` holds the bound, with its largest distance; with `stop_early`,
-    /// a triangle beyond the bound is given up as soon as one sample shows it (its worst
-    /// sample is then only the first found beyond).
-    pub(super) fn check(&self, p: [[u16; 2]; 3], stop_early: bool) -> Verdict {
-        let stop = if stop_early {
-            self.limit + self.slack
-        } else {
-            f32::INFINITY
-        };
-        let (worst, at) = scan_fast(self.grid, p, stop);
+    /// Whether every sample of triangle `p` is within the bound of its plane (a degenerate
+    /// triangle holds).
+    pub(super) fn holds(&self, p: [[u16; 2]; 3]) -> bool {
+        let worst = scan_fast(self.grid, p, self.limit + self.slack);
         if worst > self.limit + self.slack {
-            return Verdict::Beyond((worst, at));
+            return false;
         }
-        if worst <= self.limit - self.slack {
-            return Verdict::Within(worst);
-        }
-        let (exact, at) = scan_exact(self.grid, p);
-        if exact > self.limit {
-            Verdict::Beyond((exact, at))
-        } else {
-            Verdict::Within(exact)
-        }
+        worst <= self.limit - self.slack || scan_exact(self.grid, p) <= self.limit
     }
 }
 
@@ -266,41 +240,37 @@ impl Plane {
     }
 }
 
-/// Approximate (f32) largest distance of triangle `p`'s samples from its plane and where it
-/// is; stops at the first row whose largest distance exceeds `stop`.
-fn scan_fast(grid: &HeightGrid, p: [[u16; 2]; 3], stop: f32) -> Worst {
+/// Approximate (f32) largest distance of triangle `p`'s samples from its plane; stops at the
+/// first row whose largest distance exceeds `stop`.
+fn scan_fast(grid: &HeightGrid, p: [[u16; 2]; 3], stop: f32) -> f32 {
     let Some(plane) = Plane::new(grid, p) else {
-        return (0.0, p[0]);
+        return 0.0;
     };
     let Plane { w, z, dz_dx, .. } = plane;
     let (side, h) = (grid.side(), grid.heights());
     let dz_dy = (w[0].1 as f64 * z[0] + w[1].1 as f64 * z[1] + w[2].1 as f64 * z[2]) * plane.inv;
     let [x0, y0] = p[0].map(i64::from);
     let step = dz_dx as f32;
-    let mut best = (0.0f32, p[0]);
+    let mut worst = 0.0f32;
     for (y, lo, hi) in Spans::new(p, &w) {
         let start = (z[0] + dz_dx * (lo - x0) as f64 + dz_dy * (y - y0) as f64) as f32;
         let base = y as usize * side;
         let row = &h[base + lo as usize..=base + hi as usize];
-        let worst = row_deviation(row, start, step);
-        if worst > best.0 {
-            let k = position_of(row, start, step, worst);
-            best = (worst, [(lo + k as i64) as u16, y as u16]);
-            if worst > stop {
-                break;
-            }
+        worst = worst.max(row_deviation(row, start, step));
+        if worst > stop {
+            break;
         }
     }
-    best
+    worst
 }
 
-/// The exact largest |height - plane| over the samples in triangle `p` (f64) and where it is.
-pub(super) fn scan_exact(grid: &HeightGrid, p: [[u16; 2]; 3]) -> Worst {
+/// The exact largest |height - plane| over the samples in triangle `p` (f64).
+fn scan_exact(grid: &HeightGrid, p: [[u16; 2]; 3]) -> f32 {
     let Some(Plane { w, z, inv, dz_dx }) = Plane::new(grid, p) else {
-        return (0.0, p[0]);
+        return 0.0;
     };
     let (side, h) = (grid.side(), grid.heights());
-    let mut best = (0.0f32, p[0]);
+    let mut worst = 0.0f32;
     for (y, lo, hi) in Spans::new(p, &w) {
         let wl: f64 = w
             .iter()
@@ -310,13 +280,10 @@ pub(super) fn scan_exact(grid: &HeightGrid, p: [[u16; 2]; 3]) -> Worst {
         let start = wl * inv;
         let row = &h[y as usize * side + lo as usize..=y as usize * side + hi as usize];
         for (k, &v) in row.iter().enumerate() {
-            let d = (f64::from(v) - (start + dz_dx * k as f64)).abs() as f32;
-            if d > best.0 {
-                best = (d, [(lo + k as i64) as u16, y as u16]);
-            }
+            worst = worst.max((f64::from(v) - (start + dz_dx * k as f64)).abs() as f32);
         }
     }
-    best
+    worst
 }
 
 #[cfg(test)]
@@ -346,18 +313,6 @@ mod tests {
         (worst, count)
     }
 
-    /// The distance at sample `at` from the plane of `p`.
-    fn distance_at(grid: &HeightGrid, p: [[u16; 2]; 3], at: [u16; 2]) -> f32 {
-        let (w, area) = edges(p).expect("a proper triangle");
-        let z = p.map(|[x, y]| f64::from(grid.at(usize::from(x), usize::from(y))));
-        let [x, y] = at.map(i64::from);
-        let plane = (0..3)
-            .map(|k| (w[k].0 * x + w[k].1 * y + w[k].2) as f64 * z[k])
-            .sum::<f64>()
-            / area as f64;
-        (f64::from(grid.at(x as usize, y as usize)) - plane).abs() as f32
-    }
-
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(256))]
         #[test]
@@ -372,23 +327,15 @@ mod tests {
             let spanned: i64 = edges(p)
                 .map_or(0, |(w, _)| Spans::new(p, &w).map(|(_, lo, hi)| hi - lo + 1).sum());
             prop_assert_eq!(spanned as usize, inside);
-            let (exact, at) = scan_exact(&grid, p);
+            let exact = scan_exact(&grid, p);
             prop_assert!((exact - truth).abs() <= 1e-4, "{exact} vs {truth}");
-            if exact > 0.0 {
-                let there = distance_at(&grid, p, at);
-                prop_assert!((there - exact).abs() <= 1e-4, "{there} at {at:?} vs {exact}");
-            }
-            let (fast, _) = scan_fast(&grid, p, f32::INFINITY);
+            let fast = scan_fast(&grid, p, f32::INFINITY);
             let scanner = Scanner::new(&grid, limit);
             prop_assert!((fast - exact).abs() <= scanner.slack, "{fast} vs {exact}");
-            for stop_early in [false, true] {
-                match scanner.check(p, stop_early) {
-                    Verdict::Within(_) => prop_assert!(exact <= limit),
-                    Verdict::Beyond((e, _)) => {
-                        prop_assert!(exact > limit);
-                        prop_assert!(e > limit);
-                    }
-                }
+            // Bounds at the triangle's own error and a hair either side take the exact path.
+            for limit in [limit, exact, exact.next_down().max(0.0), exact.next_up()] {
+                let scanner = Scanner::new(&grid, limit);
+                prop_assert_eq!(scanner.holds(p), exact <= limit, "bound {}, error {}", limit, exact);
             }
         }
     }
