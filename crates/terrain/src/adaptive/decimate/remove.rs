@@ -356,14 +356,18 @@ impl Soup<'_> {
         while poly.len() > 3 {
             let k = poly.len();
             let clip = (0..k).find(|&i| {
-                let (a, b, c) = (poly[(i + k - 1) % k], poly[i], poly[(i + 1) % k]);
+                let a = poly[if i == 0 { k - 1 } else { i - 1 }];
+                let (b, c) = (poly[i], poly[if i + 1 == k { 0 } else { i + 1 }]);
                 if !is_ear(poly, [a, b, c], corner) {
                     return false;
                 }
                 match ears[i] {
                     Some((ea, ec, holds)) if ea == a && ec == c => holds,
                     _ => {
-                        let holds = self.scanner.holds([a, b, c].map(corner));
+                        // Edges a-b and b-c are the hole's: edges of triangles that held.
+                        let holds = self
+                            .scanner
+                            .holds([a, b, c].map(corner), [true, false, true]);
                         ears[i] = Some((a, c, holds));
                         holds
                     }
@@ -372,13 +376,14 @@ impl Soup<'_> {
             let Some(i) = clip else {
                 return false;
             };
-            let (a, c) = (poly[(i + k - 1) % k], poly[(i + 1) % k]);
+            let a = poly[if i == 0 { k - 1 } else { i - 1 }];
+            let c = poly[if i + 1 == k { 0 } else { i + 1 }];
             diagonals.extend([(a, c), (c, a)]);
             poly.remove(i);
             ears.remove(i);
         }
         let last = [poly[0], poly[1], poly[2]].map(corner);
-        orient(last[0], last[1], last[2]) < 0 && self.scanner.holds(last)
+        orient(last[0], last[1], last[2]) < 0 && self.scanner.holds(last, [true; 3])
     }
 
     /// Takes `v` out: each neighbour's ring gets, in `v`'s place, its new diagonals in
