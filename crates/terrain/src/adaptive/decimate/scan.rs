@@ -58,7 +58,9 @@ impl<'a> Scanner<'a> {
 
     /// [`Scanner::holds`] sample by sample over the bounding box `[left, right, top, bottom]`,
     /// exactly (f64): for triangles so small that setting up row spans costs more than the
-    /// samples (most ears at fine bounds have three to six samples, corners included).
+    /// samples (most ears at fine bounds have three to six samples, corners included). The
+    /// loop has no data-dependent branch: whether a sample is inside varies from sample to
+    /// sample, and mispredicting it had cost more than evaluating every sample of the box.
     fn holds_tiny(&self, p: [[u16; 2]; 3], bbox: [i64; 4], known: [bool; 3]) -> bool {
         let Some((w, area)) = edges(p) else {
             return true;
@@ -67,23 +69,29 @@ impl<'a> Scanner<'a> {
         let z = p.map(|[x, y]| f64::from(self.grid.at(usize::from(x), usize::from(y))));
         let (side, h) = (self.grid.side(), self.grid.heights());
         let inv = 1.0 / area as f64;
+        let plane_at = |e: [i64; 3]| (e[0] as f64 * z[0] + e[1] as f64 * z[1] + e[2] as f64 * z[2]) * inv;
+        // Along a row the edge functions step by their x coefficients and the plane by its
+        // east slope.
+        let step = w.map(|(a, _, _)| a);
+        let dz_dx = plane_at(step);
+        // A known edge's samples count as outside: its function must be above zero there.
+        let floor = known.map(i64::from);
+        let mut beyond = false;
         for y in top..=bottom {
-            for x in left..=right {
-                let e = w.map(|(a, b, c)| a * x + b * y + c);
-                if e[0] < 0 || e[1] < 0 || e[2] < 0 {
-                    continue;
+            let row = &h[y as usize * side..][..side];
+            let mut e = w.map(|(a, b, c)| a * left + b * y + c);
+            let mut plane = plane_at(e);
+            for &height in &row[left as usize..=right as usize] {
+                let inside = (e[0] - floor[0]) | (e[1] - floor[1]) | (e[2] - floor[2]) >= 0;
+                let d = (f64::from(height) - plane).abs() as f32;
+                beyond |= inside & (d > self.limit);
+                for k in 0..3 {
+                    e[k] += step[k];
                 }
-                if (0..3).any(|i| known[i] && e[i] == 0) {
-                    continue;
-                }
-                let plane = (e[0] as f64 * z[0] + e[1] as f64 * z[1] + e[2] as f64 * z[2]) * inv;
-                let d = (f64::from(h[y as usize * side + x as usize]) - plane).abs() as f32;
-                if d > self.limit {
-                    return false;
-                }
+                plane += dz_dx;
             }
         }
-        true
+        !beyond
     }
 }
 
