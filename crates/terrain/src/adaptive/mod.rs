@@ -5,8 +5,9 @@
 //!   hierarchy `@mapbox/martini` uses, but with the **exact** error of every triangle against
 //!   every grid sample it covers, so a mesh built for `max_error` never exceeds it (martini
 //!   measures one sample per triangle and can exceed its bound several times over).
-//! * [`decimate`]: greedy Delaunay refinement followed by Kaiser's plane-deviance vertex removal
-//!   (Kaiser 2018, Algorithm 1), for when fewer triangles matter more than build time.
+//! * [`decimate`]: the RTIN mesh, then vertex removal after Kaiser's thesis (Algorithm 1) with
+//!   the exact check on every re-triangulated hole, for when fewer triangles matter more than
+//!   build time.
 //!
 //! Both work on a [`HeightGrid`] of `(2^k + 1)^2` samples and produce an [`AdaptiveMesh`] in
 //! grid coordinates:

@@ -13,17 +13,16 @@
 //!    like the thesis a vertex whose fan holds a triangle larger than `max_triangle_area` is
 //!    kept, so large flat triangles (sea) do not grow into land.
 //!
-//! The removal scans triangles with `scan.rs`: f32 lanes over row spans, and the exact f64
-//! scan only where the f32 value is within its rounding of the bound, so every decision
-//! against the bound is the exact one.
+//! The removal scans triangles with `scan.rs`: small ones sample by sample in f64, others in
+//! f32 lanes over row spans with the exact f64 scan only where the f32 value is within its
+//! rounding of the bound, so every decision against the bound is the exact one.
 //!
 //! Until this revision step 1 was greedy Delaunay refinement (Garland and Heckbert 1995, the
 //! algorithm of `mapbox/delatin` and pydelatin) and step 2 took vertices by least plane
 //! deviance and clipped the cheapest ear first. On the tiles of `tools/compare-meshers.py`
-//! the RTIN start, with the order and ears of `remove.rs`, gives within 3 % of that
-//! pipeline's triangles (fewer on the SRTM tile) in a quarter to a half of its time:
-//! refinement alone took 1.6x pydelatin's time, and RTIN's regular vertices are as good a
-//! start for removal as the greedy ones.
+//! this pipeline makes fewer triangles than that one at 1, 5 and 30 m in 6-40 % of its time:
+//! refinement alone took 1.6x pydelatin's time, and from RTIN's vertices the removal ends
+//! within 3.5 % of the triangles it reaches from the greedy ones.
 
 mod remove;
 mod scan;
