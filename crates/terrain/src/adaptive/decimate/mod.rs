@@ -108,6 +108,7 @@ pub(super) fn orient(a: [u16; 2], b: [u16; 2], c: [u16; 2]) -> i64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::adaptive::Rtin;
     use crate::adaptive::test_grids::{assert_covers, random, rough};
     use proptest::prelude::*;
 
@@ -135,10 +136,39 @@ mod tests {
         let grid = rough(65, 9, 600.0);
         let mut options = DecimateOptions::new(4.0);
         options.remove_pass = false;
-        let greedy = decimate_with(&grid, &options);
+        let seed = decimate_with(&grid, &options);
+        assert_eq!(seed, Rtin::new(&grid).mesh(4.0));
         let both = decimate(&grid, 4.0);
-        assert!(both.triangles.len() <= greedy.triangles.len());
+        assert!(both.triangles.len() < seed.triangles.len() * 3 / 4);
         assert!(both.max_error(&grid) <= 4.0 + 1e-3);
+        // Every vertex left is one of the seed's.
+        assert!(both.vertices.iter().all(|v| seed.vertices.contains(v)));
+    }
+
+    #[test]
+    fn large_triangles_keep_their_vertices() {
+        let grid = rough(65, 3, 400.0);
+        let mut options = DecimateOptions::new(3.0);
+        let free = decimate_with(&grid, &options).triangles.len();
+        // No fan may hold a triangle of any area: nothing can be removed.
+        options.max_triangle_area = Some(0.0);
+        let kept = decimate_with(&grid, &options);
+        assert_eq!(
+            kept.triangles.len(),
+            Rtin::new(&grid).mesh(3.0).triangles.len()
+        );
+        // Fans of small triangles only: some removals, fewer than without the limit.
+        options.max_triangle_area = Some(2.0);
+        let limited = decimate_with(&grid, &options).triangles.len();
+        assert!(
+            free < limited && limited < kept.triangles.len(),
+            "{free} < {limited} < {}",
+            kept.triangles.len()
+        );
+        // RTIN's interior vertices have 4 or 8 neighbours: with at most 3 allowed, none goes.
+        let mut options = DecimateOptions::new(3.0);
+        options.max_neighbours = 3;
+        assert_eq!(decimate_with(&grid, &options), kept);
     }
 
     #[test]
