@@ -358,7 +358,7 @@ impl Soup<'_> {
             let clip = (0..k).find(|&i| {
                 let a = poly[if i == 0 { k - 1 } else { i - 1 }];
                 let (b, c) = (poly[i], poly[if i + 1 == k { 0 } else { i + 1 }]);
-                if !is_ear(poly, [a, b, c], corner) {
+                if !is_ear(poly, i, corner) {
                     return false;
                 }
                 match ears[i] {
@@ -412,17 +412,22 @@ impl Soup<'_> {
     }
 }
 
-/// Whether corners `t` = (a, b, c) of `poly` (positions) make a proper ear: wound like the
-/// mesh and with no other polygon vertex inside or on it.
-fn is_ear(poly: &[usize], t: [usize; 3], corner: impl Fn(usize) -> [u16; 2]) -> bool {
-    let [a, b, c] = t.map(&corner);
+/// Whether the corner at position `i` of `poly` and its two neighbours make a proper ear:
+/// wound like the mesh and with no other polygon vertex inside or on it.
+fn is_ear(poly: &[usize], i: usize, corner: impl Fn(usize) -> [u16; 2]) -> bool {
+    let k = poly.len();
+    let prev = if i == 0 { k - 1 } else { i - 1 };
+    let next = if i + 1 == k { 0 } else { i + 1 };
+    let [a, b, c] = [poly[prev], poly[i], poly[next]].map(&corner);
     if orient(a, b, c) >= 0 {
         return false;
     }
-    poly.iter().filter(|&&x| !t.contains(&x)).all(|&x| {
-        let q = corner(x);
+    // The other vertices, from the one after `next` round to the one before `prev`.
+    (2..k - 1).all(|m| {
+        let j = if i + m >= k { i + m - k } else { i + m };
+        let q = corner(poly[j]);
         // Outside if strictly on the outer side of any edge (mesh winding is negative).
-        orient(a, b, q) > 0 || orient(b, c, q) > 0 || orient(c, a, q) > 0
+        (orient(a, b, q) > 0) | (orient(b, c, q) > 0) | (orient(c, a, q) > 0)
     })
 }
 
