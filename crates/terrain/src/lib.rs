@@ -7,8 +7,8 @@
 //!   relative to its own origin (f32), normals, skirts and exact bounds, ready to upload.
 //! * [`grid`]: the sample grid every tile shares.
 //! * [`MorphVertex`]: where a mesh's vertices lie on its parent's surface (geomorphing).
-//! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and greedy Delaunay plus
-//!   Kaiser's plane-deviance decimation).
+//! * [`adaptive`]: meshes with an exact vertical error bound (RTIN, and RTIN followed by
+//!   vertex removal after Kaiser's decimation).
 //! * [`quantized_mesh`]: Cesium's quantized-mesh-1.0, encoded and decoded (untrusted input).
 //! * [`refine`]: procedural refinement below the data (terrain and imagery).
 //! * [`encoding`]: elevation as RGB (Terrarium, Mapbox Terrain-RGB, Kaiser's centimetres).
