@@ -356,8 +356,8 @@ impl Soup<'_> {
         while poly.len() > 3 {
             let k = poly.len();
             let clip = (0..k).find(|&i| {
-                let a = poly[if i == 0 { k - 1 } else { i - 1 }];
-                let (b, c) = (poly[i], poly[if i + 1 == k { 0 } else { i + 1 }]);
+                let (prev, next) = around(i, k);
+                let [a, b, c] = [poly[prev], poly[i], poly[next]];
                 if !is_ear(poly, i, corner) {
                     return false;
                 }
@@ -376,8 +376,8 @@ impl Soup<'_> {
             let Some(i) = clip else {
                 return false;
             };
-            let a = poly[if i == 0 { k - 1 } else { i - 1 }];
-            let c = poly[if i + 1 == k { 0 } else { i + 1 }];
+            let (prev, next) = around(i, k);
+            let (a, c) = (poly[prev], poly[next]);
             diagonals.extend([(a, c), (c, a)]);
             poly.remove(i);
             ears.remove(i);
@@ -416,8 +416,7 @@ impl Soup<'_> {
 /// wound like the mesh and with no other polygon vertex inside or on it.
 fn is_ear(poly: &[usize], i: usize, corner: impl Fn(usize) -> [u16; 2]) -> bool {
     let k = poly.len();
-    let prev = if i == 0 { k - 1 } else { i - 1 };
-    let next = if i + 1 == k { 0 } else { i + 1 };
+    let (prev, next) = around(i, k);
     let [a, b, c] = [poly[prev], poly[i], poly[next]].map(&corner);
     if orient(a, b, c) >= 0 {
         return false;
@@ -429,6 +428,14 @@ fn is_ear(poly: &[usize], i: usize, corner: impl Fn(usize) -> [u16; 2]) -> bool 
         // Outside if strictly on the outer side of any edge (mesh winding is negative).
         (orient(a, b, q) > 0) | (orient(b, c, q) > 0) | (orient(c, a, q) > 0)
     })
+}
+
+/// The positions before and after `i` in a cycle of `k` (without a division).
+fn around(i: usize, k: usize) -> (usize, usize) {
+    (
+        if i == 0 { k - 1 } else { i - 1 },
+        if i + 1 == k { 0 } else { i + 1 },
+    )
 }
 
 #[cfg(test)]
