@@ -259,7 +259,8 @@ impl Soup<'_> {
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.ring.clear();
         scratch.ring.extend_from_slice(self.rings.get(v));
-        let done = self.allowed(v, &scratch.ring, options) && self.clip_ears(&mut scratch);
+        let done = self.allowed(v, &scratch.ring, options)
+            && self.clip_ears(self.points[v as usize], &mut scratch);
         if done {
             self.rewire(v, &mut scratch);
         }
@@ -341,7 +342,8 @@ impl Soup<'_> {
     /// Triangulates the hole `scratch.ring` by clipping, each time, the first ear in ring
     /// order that holds the bound, recording the new edges in `scratch.diagonals`; false if
     /// some step has no such ear. An ear's scan is kept until one of its neighbours changes.
-    fn clip_ears(&self, scratch: &mut Scratch) -> bool {
+    /// `centre`: where the removed vertex was.
+    fn clip_ears(&self, centre: [u16; 2], scratch: &mut Scratch) -> bool {
         let Scratch {
             ring,
             poly,
@@ -355,12 +357,15 @@ impl Soup<'_> {
         ears.clear();
         ears.resize(poly.len(), None);
         diagonals.clear();
+        // Whether the polygon left is star-shaped from `centre`: the hole is at first (the
+        // ring round it), and stays so while the ears clipped leave `centre` outside.
+        let mut star = true;
         while poly.len() > 3 {
             let k = poly.len();
             let clip = (0..k).find(|&i| {
                 let (prev, next) = around(i, k);
                 let [a, b, c] = [poly[prev], poly[i], poly[next]];
-                if !is_ear(poly, i, corner) {
+                if !is_ear(poly, i, corner, star.then_some(centre)) {
                     return false;
                 }
                 match ears[b] {
@@ -380,6 +385,7 @@ impl Soup<'_> {
             };
             let (prev, next) = around(i, k);
             let (a, c) = (poly[prev], poly[next]);
+            star &= orient(centre, corner(a), corner(c)) < 0;
             diagonals.extend([(a, c), (c, a)]);
             // By hand: `Vec::remove` calls memmove, whose size classes mispredict on these
             // few elements.
@@ -424,7 +430,19 @@ impl Soup<'_> {
 
 /// Whether the corner at position `i` of `poly` and its two neighbours make a proper ear:
 /// wound like the mesh and with no other polygon vertex inside or on it.
-fn is_ear(poly: &[usize], i: usize, corner: impl Fn(usize) -> [u16; 2]) -> bool {
+///
+/// `star`: a point the polygon is star-shaped from, its vertices in angular order round it
+/// (the removed vertex, while no clipped ear has reached it). Then an ear that turns less
+/// than half a turn round that point (wound like the mesh as seen from it) lies in the convex
+/// wedge from it through the ear's two ends, and every other vertex lies outside that wedge
+/// (the vertices' directions from the point are distinct and in order): no vertex need be
+/// tested. Most ears are of this kind.
+fn is_ear(
+    poly: &[usize],
+    i: usize,
+    corner: impl Fn(usize) -> [u16; 2],
+    star: Option<[u16; 2]>,
+) -> bool {
     let k = poly.len();
     let (prev, next) = around(i, k);
     let [a, b, c] = [poly[prev], poly[i], poly[next]].map(&corner);
@@ -432,12 +450,24 @@ fn is_ear(poly: &[usize], i: usize, corner: impl Fn(usize) -> [u16; 2]) -> bool 
         return false;
     }
     // The other vertices, from the one after `next` round to the one before `prev`.
-    (2..k - 1).all(|m| {
-        let j = if i + m >= k { i + m - k } else { i + m };
-        let q = corner(poly[j]);
-        // Outside if strictly on the outer side of any edge (mesh winding is negative).
-        (orient(a, b, q) > 0) | (orient(b, c, q) > 0) | (orient(c, a, q) > 0)
-    })
+    let none_inside = || {
+        (2..k - 1).all(|m| {
+            let j = if i + m >= k { i + m - k } else { i + m };
+            let q = corner(poly[j]);
+            // Outside if strictly on the outer side of any edge (mesh winding is negative).
+            (orient(a, b, q) > 0) | (orient(b, c, q) > 0) | (orient(c, a, q) > 0)
+        })
+    };
+    if let Some(o) = star
+        && orient(o, a, c) < 0
+    {
+        debug_assert!(
+            none_inside(),
+            "a vertex inside the wedge of {a:?} {b:?} {c:?}"
+        );
+        return true;
+    }
+    none_inside()
 }
 
 /// The positions before and after `i` in a cycle of `k` (without a division).
