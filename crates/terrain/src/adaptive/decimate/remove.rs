@@ -436,7 +436,8 @@ impl Soup<'_> {
 /// than half a turn round that point (wound like the mesh as seen from it) lies in the convex
 /// wedge from it through the ear's two ends, and every other vertex lies outside that wedge
 /// (the vertices' directions from the point are distinct and in order): no vertex need be
-/// tested. Most ears are of this kind.
+/// tested. About half the convex ears are of this kind (49-51 % on the tiles of
+/// `tools/compare-meshers.py` at 1, 5 and 30 m).
 fn is_ear(
     poly: &[usize],
     i: usize,
