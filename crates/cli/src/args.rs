@@ -237,6 +237,10 @@ pub struct BenchArgs {
     /// the 120 frames at the configured bound (--sse, default 2 px) instead.
     #[arg(long, requires = "popping")]
     pub descent: bool,
+    /// With --popping: also write every frame to this folder as NNN.png (made if missing),
+    /// to look at the sweep and at what changed between two frames.
+    #[arg(long, requires = "popping")]
+    pub frames_dir: Option<PathBuf>,
     /// Traffic benchmark: replay this record (OpenSky state-vector CSV, plain or gzip) from
     /// --time at --speed for --frames frames at --fps, with the camera still at --camera
     /// (default: over the aircraft), and report the cost of ticks, of the layer's frames and

@@ -400,12 +400,15 @@ fn bench_popping_descends_at_a_fixed_bound() {
 
 #[test]
 fn bench_popping_reports_what_each_split_changes() {
+    let dir = std::env::temp_dir().join(format!("globus-cli-popping-{}", std::process::id()));
     let v = json(&globus(&[
         "bench",
         "--popping",
         "7.6,46,8000,200,-10",
         "--size",
         "96x54",
+        "--frames-dir",
+        dir.to_str().unwrap(),
     ]));
     assert_eq!(v["frames"], 121, "{v}");
     let frames = v["per_frame"].as_array().unwrap();
@@ -421,6 +424,30 @@ fn bench_popping_reports_what_each_split_changes() {
     assert!(changing > 0 && changing <= 120, "{v}");
     let share = v["changed_share"]["max"].as_f64().unwrap();
     assert!(share > 0.0 && share <= 1.0, "{v}");
+    // Every frame is written; the sweep's totals add up from the frames and read back from
+    // the first and last pictures.
+    let frame = |i: usize| {
+        globus_test_support::image::Rgba::read(&dir.join(format!("{i:03}.png"))).unwrap()
+    };
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 121);
+    let (first, last) = (frame(0), frame(120));
+    assert_eq!((first.width, first.height), (96, 54));
+    let net = v["net_mean_abs_change"].as_f64().unwrap();
+    assert!((net - first.mean_abs_diff(&last)).abs() < 1e-9, "{v}");
+    let total = v["total_mean_abs_change"].as_f64().unwrap();
+    let added: f64 = frames[1..]
+        .iter()
+        .map(|f| f["mean_abs_change"].as_f64().unwrap())
+        .sum();
+    assert!((total - added).abs() < 1e-9, "{v}");
+    assert!(net > 0.0 && net <= total + 1e-9, "{v}");
+    let floor = v["even_spread_floor"].as_f64().unwrap();
+    assert!((floor - total / 120.0).abs() < 1e-9, "{v}");
+    assert!(
+        v["mean_abs_change"]["max"].as_f64().unwrap() >= floor,
+        "{v}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

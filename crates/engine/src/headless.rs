@@ -198,6 +198,29 @@ pub struct SweepFrame {
     pub change: Option<FrameChange>,
 }
 
+/// What [`Headless::sweep`] measured: each frame's change, and the change from the first
+/// frame to the last.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    /// Per frame, in order.
+    pub frames: Vec<SweepFrame>,
+    /// The last frame against the first (`None` with fewer than two frames): what the sweep
+    /// changed in all. The frames' changes add up to at least this much (the triangle
+    /// inequality, pixel by pixel); what they add beyond it went back and forth on the way.
+    pub net: Option<FrameChange>,
+}
+
+impl Sweep {
+    /// The frames' mean absolute changes added up (of 255): at least [`Sweep::net`]'s, and
+    /// the frames' largest change is at least this over the number of changes.
+    pub fn total_mean_abs(&self) -> f64 {
+        self.frames
+            .iter()
+            .filter_map(|f| f.change.map(|c| c.mean_abs))
+            .sum()
+    }
+}
+
 impl Headless {
     /// The popping measurement (issue 20): draws `frames` (a view and the error bound to
     /// draw it with) in order, each loaded completely before it is drawn (within `timeout`),
@@ -210,8 +233,21 @@ impl Headless {
         frames: &[(View, f64)],
         visible: u8,
         timeout: Duration,
-    ) -> Result<Vec<SweepFrame>, EngineError> {
+    ) -> Result<Sweep, EngineError> {
+        self.sweep_each(frames, visible, timeout, |_, _| {})
+    }
+
+    /// [`Headless::sweep`], handing each picture to `each` with its number as it is drawn
+    /// (to write the frames out and look at them).
+    pub fn sweep_each(
+        &mut self,
+        frames: &[(View, f64)],
+        visible: u8,
+        timeout: Duration,
+        mut each: impl FnMut(u32, &RgbaImage),
+    ) -> Result<Sweep, EngineError> {
         let mut out = Vec::with_capacity(frames.len());
+        let mut first: Option<RgbaImage> = None;
         let mut before: Option<RgbaImage> = None;
         for (step, (view, bound)) in frames.iter().enumerate() {
             self.globe.set_error_bound_px(*bound)?;
@@ -223,6 +259,7 @@ impl Headless {
                     timeout,
                 });
             }
+            each(step as u32, &frame.image);
             out.push(SweepFrame {
                 sse_bound_px: frame.report.sse_bound_px,
                 tiles: frame.report.selection.selected,
@@ -231,9 +268,16 @@ impl Headless {
                     .as_ref()
                     .and_then(|b| frame_change(b, &frame.image, visible)),
             });
+            if first.is_none() {
+                first = Some(frame.image.clone());
+            }
             before = Some(frame.image);
         }
-        Ok(out)
+        let net = match (&first, &before) {
+            (Some(a), Some(b)) if out.len() > 1 => frame_change(a, b, visible),
+            _ => None,
+        };
+        Ok(Sweep { frames: out, net })
     }
 }
 

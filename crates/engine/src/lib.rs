@@ -79,8 +79,8 @@ pub use error::EngineError;
 pub use globe::{FrameReport, Globe, MemoryUse, Pick};
 pub use globus_vector::{Feature, StyleRules};
 pub use headless::{
-    FrameChange, Headless, RenderedFrame, SweepFrame, frame_change, geometric_steps, holes_inside,
-    save_png,
+    FrameChange, Headless, RenderedFrame, Sweep, SweepFrame, frame_change, geometric_steps,
+    holes_inside, save_png,
 };
 pub use overlay::{FrameContext, Overlay, OverlayPass};
 pub use query::{TerrainHeight, ray_march};

@@ -25,6 +25,18 @@ impl Rgba {
         ]
     }
 
+    /// Reads an image file (PNG, JPEG, ...) as RGBA8.
+    pub fn read(path: &Path) -> Result<Self, std::io::Error> {
+        let img = image::open(path)
+            .map_err(|e| std::io::Error::other(format!("reading {}: {e}", path.display())))?
+            .to_rgba8();
+        Ok(Self {
+            width: img.width(),
+            height: img.height(),
+            pixels: img.into_raw(),
+        })
+    }
+
     /// Writes a PNG (alpha forced opaque when `opaque`), for a person to look at.
     pub fn save_png(&self, path: &Path, opaque: bool) -> Result<(), std::io::Error> {
         let mut px = self.pixels.clone();

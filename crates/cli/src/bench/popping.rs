@@ -4,7 +4,9 @@
 //! frame, as levels halve the error); every frame is loaded completely before it is drawn, so
 //! what changes between two frames is only what the new bound split. Per frame: the mean
 //! absolute change of a colour channel against the frame before and the share of pixels
-//! changing by more than 8/255.
+//! changing by more than 8/255. Over the sweep: the changes added up, the change from the
+//! first frame to the last (what the sum would be if no pixel went back and forth), and the
+//! sum over the number of frames, the least the largest frame's change can be.
 //!
 //! With `--descent` the camera instead comes straight down from its height to a quarter of
 //! it over the 120 frames (geometrically) at the configured bound: motion changes every
@@ -14,7 +16,7 @@
 use std::time::Duration;
 
 use anyhow::Context;
-use globus_engine::{CameraSpec, GlobeBuilder, Headless, View, geometric_steps};
+use globus_engine::{CameraSpec, GlobeBuilder, Headless, View, geometric_steps, save_png};
 
 use super::quantiles;
 use crate::args::{self, BenchArgs};
@@ -52,8 +54,29 @@ pub fn run(
             .collect();
         (schedule, [COARSEST_PX, FINEST_PX])
     };
-    let frames: Vec<serde_json::Value> = off
-        .sweep(&schedule, VISIBLE, Duration::from_secs(300))?
+    if let Some(dir) = &a.frames_dir {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("--frames-dir: cannot make {}", dir.display()))?;
+    }
+    // The first frame that could not be written stops the sweep's output, not the sweep.
+    let mut unwritten: Option<std::io::Error> = None;
+    let sweep = off.sweep_each(&schedule, VISIBLE, Duration::from_secs(300), |i, image| {
+        if let (Some(dir), None) = (&a.frames_dir, &unwritten)
+            && let Err(e) = save_png(image, &dir.join(format!("{i:03}.png")))
+        {
+            unwritten = Some(e);
+        }
+    })?;
+    if let Some(e) = unwritten {
+        return Err(e).context("--frames-dir");
+    }
+    // Every frame's change adds up to at least the sweep's net change; the largest frame
+    // carries at least the sum over the number of frames (the floor an even spread meets).
+    let total = sweep.total_mean_abs();
+    let net = sweep.net.map(|c| c.mean_abs);
+    let changes = sweep.frames.len().saturating_sub(1).max(1) as f64;
+    let frames: Vec<serde_json::Value> = sweep
+        .frames
         .into_iter()
         .map(|f| {
             serde_json::json!({
@@ -84,6 +107,9 @@ pub fn run(
         "mean_abs_change": quantiles(mean),
         "changed_share": quantiles(share),
         "frames_changing": changing,
+        "total_mean_abs_change": total,
+        "net_mean_abs_change": net,
+        "even_spread_floor": total / changes,
         "largest_step": largest_step,
         "per_frame": frames,
     });
